@@ -1,0 +1,24 @@
+"""Shared fixtures: small deterministic anchor sets for physics tests."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from helpers import ball_points
+
+from reconphys.physics import knn_springs, sample_volume_anchors
+
+
+@pytest.fixture(scope="session")
+def ball_anchors():
+    """128 volume anchors of a ball of radius 0.2 m and their K = 16 springs (float64)."""
+    anchors = sample_volume_anchors(ball_points(4000, 0.2), 128, seed="test-ball").double()
+    springs, _ = knn_springs(anchors, 16)
+    rest = (anchors[springs[:, 1]] - anchors[springs[:, 0]]).norm(dim=1)
+    return anchors, springs, rest
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _flush_denormals():
+    # Settling objects drive velocities into float32 denormals, which are ~100x slower on CPU.
+    torch.set_flush_denormal(True)

@@ -1,0 +1,22 @@
+"""Small deterministic geometry shared by the tests."""
+
+from __future__ import annotations
+
+import torch
+
+
+
+def ball_points(count: int, radius: float, seed: int = 0) -> torch.Tensor:
+    """``count`` points uniformly in a ball of ``radius`` around the origin, [count, 3]."""
+    g = torch.Generator().manual_seed(seed)
+    direction = torch.randn(count, 3, generator=g, dtype=torch.float64)
+    direction = direction / direction.norm(dim=1, keepdim=True)
+    r = radius * torch.rand(count, 1, generator=g, dtype=torch.float64) ** (1 / 3)
+    return direction * r
+
+
+def box_grid(nx: int, ny: int, nz: int, spacing: float) -> torch.Tensor:
+    """Anchors on a regular grid with the lowest layer at z = 0, centred in x and y, [N, 3]."""
+    axes = [torch.arange(n, dtype=torch.float64) * spacing for n in (nx, ny, nz)]
+    grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    return grid - torch.tensor([(nx - 1) * spacing / 2, (ny - 1) * spacing / 2, 0.0])

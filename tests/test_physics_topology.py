@@ -1,0 +1,134 @@
+"""Anchors, springs, binding and the stability bound against brute force and dense linear algebra."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from helpers import ball_points
+
+from reconphys.physics import (
+    SpringMassModel,
+    State,
+    compute_binding,
+    deform_means,
+    knn_springs,
+    rollout,
+    sample_volume_anchors,
+    seed_from_id,
+    stable_substeps,
+)
+from reconphys.physics.integrator import largest_eigenvalue
+
+
+def sphere_shell(count: int, radius: float) -> torch.Tensor:
+    p = ball_points(count, 1.0, seed=5)
+    return radius * p / p.norm(dim=1, keepdim=True)
+
+
+def test_anchors_fill_the_volume_of_a_surface_only_object():
+    anchors = sample_volume_anchors(sphere_shell(6000, 0.25), 512, seed="shell")
+    r = anchors.double().norm(dim=1)
+    assert r.max() < 0.25 + 0.25 * 2 / 40 * 2, "anchors stay within a voxel of the surface"
+    inner = (r < 0.125).double().mean().item()  # uniform in volume: (1/2)^3 = 12.5 %
+    assert 0.07 < inner < 0.18
+
+
+def test_anchors_are_seeded_by_object_id():
+    points = ball_points(3000, 0.2)
+    a = sample_volume_anchors(points, 256, seed="chair-01")
+    assert torch.equal(a, sample_volume_anchors(points, 256, seed="chair-01"))
+    assert not torch.equal(a, sample_volume_anchors(points, 256, seed="chair-02"))
+    assert seed_from_id("chair-01") == seed_from_id("chair-01") != seed_from_id("chair-02")
+
+
+def test_anchors_are_evenly_spread():
+    anchors = sample_volume_anchors(ball_points(5000, 0.2), 256, seed="spread").double()
+    distance = torch.cdist(anchors, anchors) + torch.eye(256, dtype=torch.float64) * 1e9
+    nearest = distance.min(1).values
+    assert nearest.min() > 0.3 * nearest.median(), "farthest-point sampling avoids clumps"
+
+
+def test_knn_springs_match_brute_force():
+    points = torch.rand(60, 3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    springs, rest = knn_springs(points, 5)
+    pairs = {tuple(p) for p in springs.tolist()}
+    assert len(pairs) == len(springs) and all(i < j for i, j in pairs)
+    distance = torch.cdist(points, points) + torch.eye(60, dtype=torch.float64) * 1e9
+    expected = set()
+    for i, row in enumerate(distance.argsort(1)[:, :5].tolist()):
+        expected |= {(min(i, j), max(i, j)) for j in row}
+    assert pairs == expected
+    lengths = (points[springs[:, 1]] - points[springs[:, 0]]).norm(dim=1)
+    assert torch.allclose(rest.double(), lengths, rtol=1e-6)
+
+
+def test_binding_weights_follow_inverse_distance():
+    g = torch.Generator().manual_seed(4)
+    anchors, means = torch.rand(40, 3, generator=g), torch.rand(25, 3, generator=g)
+    index, weight = compute_binding(means, anchors, num_neighbors=6, power=2.0)
+    assert torch.allclose(weight.sum(1), torch.ones(25))
+    n = 3
+    distance = (anchors - means[n]).norm(dim=1).double()
+    nearest = distance.argsort()[:6]
+    assert set(index[n].tolist()) == set(nearest.tolist())
+    expected = distance[index[n]] ** -2
+    assert torch.allclose(weight[n].double(), expected / expected.sum(), rtol=1e-5)
+
+
+def test_binding_moves_means_with_a_translation():
+    g = torch.Generator().manual_seed(4)
+    anchors, means = torch.rand(40, 3, generator=g), torch.rand(25, 3, generator=g)
+    index, weight = compute_binding(means, anchors)
+    shift = torch.tensor([0.1, -0.2, 0.3])
+    moved = deform_means(means, anchors, (anchors + shift)[None, None], index, weight)
+    assert moved.shape == (1, 1, 25, 3)
+    assert torch.allclose(moved[0, 0], means + shift, atol=1e-6)
+    # A Gaussian sitting on an anchor follows that anchor alone.
+    index, weight = compute_binding(anchors[:1], anchors)
+    kick = torch.zeros_like(anchors)
+    kick[0] = 1.0
+    assert torch.allclose(deform_means(anchors[:1], anchors, anchors + kick, index, weight),
+                          anchors[:1] + 1.0, atol=1e-5)
+
+
+def dense_stiffness(points: torch.Tensor, springs: torch.Tensor, rest: torch.Tensor) -> np.ndarray:
+    """The linearised stiffness matrix Σ (1/l) [u uᵀ, −u uᵀ; −u uᵀ, u uᵀ] built entry by entry."""
+    n = points.shape[0]
+    matrix = np.zeros((3 * n, 3 * n))
+    p = points.double().numpy()
+    for (i, j), length in zip(springs.tolist(), rest.double().tolist()):
+        u = (p[j] - p[i]) / np.linalg.norm(p[j] - p[i])
+        block = np.outer(u, u) / length
+        for a, b, sign in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):
+            matrix[3 * a : 3 * a + 3, 3 * b : 3 * b + 3] += sign * block
+    return matrix
+
+
+def test_power_iteration_eigenvalue_matches_dense_solver(ball_anchors):
+    anchors, springs, rest = ball_anchors
+    mass = 0.5 + torch.rand(1, anchors.shape[0], generator=torch.Generator().manual_seed(0))
+    mass = mass.double()
+    model = SpringMassModel(springs, rest, mass, 1.0, 1.0, 0.0, dtype=torch.float64)
+    one = torch.ones(1, 1, dtype=torch.float64)
+    estimate = largest_eigenvalue(model, anchors[None], one, mass).item()
+    inverse_sqrt_mass = np.repeat(mass[0].numpy() ** -0.5, 3)
+    matrix = dense_stiffness(anchors, springs, rest)
+    exact = np.linalg.eigvalsh(inverse_sqrt_mass[:, None] * matrix * inverse_sqrt_mass[None]).max()
+    assert 0.9 * exact < estimate <= exact * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("m, k, d", [(0.2, 1200.0, 5.0), (0.2, 1200.0, 0.1), (1.0, 300.0, 1.0)])
+def test_stability_bound_is_stable_and_not_wasteful(ball_anchors, m, k, d):
+    anchors, springs, rest = ball_anchors
+    model = SpringMassModel(springs, rest, m, k, d, 0.5, dtype=torch.float64)
+    x0 = anchors + torch.tensor([0.0, 0.0, 0.21], dtype=torch.float64)
+    v0 = 0.3 * torch.randn(x0.shape, generator=torch.Generator().manual_seed(0), dtype=x0.dtype)
+    state = State(x0[None], v0[None])
+    substeps = stable_substeps(model, state.x)
+    stable = rollout(model, state, num_frames=5, substeps=substeps)
+    assert torch.isfinite(stable.x).all() and stable.x.abs().max() < 1.0
+    unstable = rollout(model, state, num_frames=5, substeps=max(1, substeps // 4))
+    assert not (torch.isfinite(unstable.x).all() and unstable.x.abs().max() < 1.0), (
+        "a quarter of the bound should already blow up: the bound would be too conservative"
+    )
