@@ -5,7 +5,6 @@ from __future__ import annotations
 import torch
 
 
-
 def ball_points(count: int, radius: float, seed: int = 0) -> torch.Tensor:
     """``count`` points uniformly in a ball of ``radius`` around the origin, [count, 3]."""
     g = torch.Generator().manual_seed(seed)

@@ -6,19 +6,18 @@ import itertools
 
 import pytest
 import torch
+from helpers import box_grid
 
 from reconphys.physics import (
     SpringMassModel,
     State,
     kinetic_energy,
-    potential_energy,
     knn_springs,
+    potential_energy,
     rollout,
     spring_energy,
     stable_substeps,
 )
-
-from helpers import box_grid
 
 G = 9.8
 
@@ -64,7 +63,14 @@ def test_momentum_and_energy_conserved_without_gravity_damping_ground(ball_ancho
     g = torch.Generator().manual_seed(3)
     v0 = 0.3 * torch.randn(anchors.shape, generator=g, dtype=anchors.dtype)
     model = make_model(
-        springs, rest, 0.7, 150.0, 0.0, 0.5, spring_exponent=0.0, gravity=(0, 0, 0),
+        springs,
+        rest,
+        0.7,
+        150.0,
+        0.0,
+        0.5,
+        spring_exponent=0.0,
+        gravity=(0, 0, 0),
         ground_height=-100.0,
     )
     state = State(anchors[None].clone(), v0[None])
@@ -148,7 +154,10 @@ def test_per_scene_topology_matches_shared(ball_anchors):
     anchors, springs, rest = ball_anchors
     x0 = (anchors + torch.tensor([0.0, 0.0, 0.21], dtype=anchors.dtype)).expand(2, -1, -1)
     state = State(x0.contiguous(), torch.zeros_like(x0))
-    m, k = torch.tensor([0.5, 2.0], dtype=rest.dtype), torch.tensor([100.0, 900.0], dtype=rest.dtype)
+    m, k = (
+        torch.tensor([0.5, 2.0], dtype=rest.dtype),
+        torch.tensor([100.0, 900.0], dtype=rest.dtype),
+    )
     shared = make_model(springs, rest, m, k, 1.0, 0.5)
     batched = make_model(springs.expand(2, -1, -1), rest.expand(2, -1), m, k, 1.0, 0.5)
     a = rollout(shared, state, num_frames=5, substeps=60)

@@ -1,4 +1,4 @@
-"""Anchors, springs, binding and the stability bound against brute force and dense linear algebra."""
+"""Anchors, springs, binding and the stability bound against brute force and dense algebra."""
 
 from __future__ import annotations
 
@@ -88,8 +88,11 @@ def test_binding_moves_means_with_a_translation():
     index, weight = compute_binding(anchors[:1], anchors)
     kick = torch.zeros_like(anchors)
     kick[0] = 1.0
-    assert torch.allclose(deform_means(anchors[:1], anchors, anchors + kick, index, weight),
-                          anchors[:1] + 1.0, atol=1e-5)
+    assert torch.allclose(
+        deform_means(anchors[:1], anchors, anchors + kick, index, weight),
+        anchors[:1] + 1.0,
+        atol=1e-5,
+    )
 
 
 def dense_stiffness(points: torch.Tensor, springs: torch.Tensor, rest: torch.Tensor) -> np.ndarray:
@@ -97,7 +100,7 @@ def dense_stiffness(points: torch.Tensor, springs: torch.Tensor, rest: torch.Ten
     n = points.shape[0]
     matrix = np.zeros((3 * n, 3 * n))
     p = points.double().numpy()
-    for (i, j), length in zip(springs.tolist(), rest.double().tolist()):
+    for (i, j), length in zip(springs.tolist(), rest.double().tolist(), strict=True):
         u = (p[j] - p[i]) / np.linalg.norm(p[j] - p[i])
         block = np.outer(u, u) / length
         for a, b, sign in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):

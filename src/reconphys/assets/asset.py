@@ -125,7 +125,7 @@ def derived_figures(asset: Asset) -> dict:
         "rest_length_m": [float(length.min()), float(length.max())],
         "num_springs": int(asset.springs.shape[0]),
         "num_gaussians": int(asset.gaussians.num_gaussians),
-        "units": "SI: metres, seconds, kilograms; mass is per anchor; z up; ground at ground_height",
+        "units": "SI (m, s, kg); mass is per anchor; z up; ground at ground_height",
     }
 
 
@@ -195,7 +195,9 @@ def _array(data: dict, path: Path, name: str, kind: str, shape: tuple) -> np.nda
     if not ok_kind:
         expected = "floating point" if kind == "f" else "integer"
         raise InputError(f"dtype {a.dtype}, expected {expected}", source=str(path), field=name)
-    if a.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, a.shape)):
+    if a.ndim != len(shape) or any(
+        s is not None and s != n for s, n in zip(shape, a.shape, strict=False)
+    ):
         want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
         raise InputError(f"shape {list(a.shape)}, expected {want}", source=str(path), field=name)
     if kind == "f" and not np.isfinite(a).all():

@@ -63,7 +63,8 @@ class Gaussians:
     def map(self, fn) -> Gaussians:
         """Apply ``fn`` to every tensor field (e.g. ``lambda t: t.to(device)``)."""
         return replace(
-            self, **{f.name: fn(v) for f in fields(self) if (v := getattr(self, f.name)) is not None}
+            self,
+            **{f.name: fn(v) for f in fields(self) if (v := getattr(self, f.name)) is not None},
         )
 
     def to(self, *args, **kwargs) -> Gaussians:
@@ -83,5 +84,9 @@ class Gaussians:
 
         return replace(
             self,
-            **{f.name: take(f.name, v) for f in fields(self) if (v := getattr(self, f.name)) is not None},
+            **{
+                f.name: take(f.name, v)
+                for f in fields(self)
+                if (v := getattr(self, f.name)) is not None
+            },
         )

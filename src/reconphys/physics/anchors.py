@@ -93,5 +93,7 @@ def sample_volume_anchors(
     picked = rng.integers(0, len(cells), size=num_candidates)
     candidates = origin + (cells[picked] + rng.random((num_candidates, 3))) * voxel
     candidates = torch.from_numpy(candidates)
-    index = farthest_point_sampling(candidates, num_anchors, first=int(rng.integers(num_candidates)))
+    index = farthest_point_sampling(
+        candidates, num_anchors, first=int(rng.integers(num_candidates))
+    )
     return candidates[index].float()

@@ -132,7 +132,7 @@ def largest_eigenvalue(
     mass: Tensor,  # [B|1, N_A|1] kg
     iterations: int = POWER_ITERATIONS,
 ) -> Tensor:  # [B] 1/s² (for k) or 1/s (for d)
-    """Largest eigenvalue of M⁻¹A per scene, A the linearised spring operator with ``coefficient/l``.
+    """Largest eigenvalue of M⁻¹A per scene; A is the linearised spring operator with c/l.
 
     ``(A δ)_i = Σ_j (c_ij / l_ij) (u_ij u_ijᵀ)(δ_i − δ_j)``; power iteration on the symmetric
     M^-½ A M^-½ with a fixed start, so the estimate is deterministic (and slightly low).

@@ -10,7 +10,7 @@ Every tensor is normalised on construction to a broadcastable batched shape:
 A 0-d value means "one value for every scene", a 1-d value of length B "one value per scene", and a
 2-d value ``[B, N_A]`` / ``[B, E]`` per anchor / per spring.
 
-Units: mass in kg per anchor; stiffness k in N per unit strain (the spring constant is k / l in N/m);
+Units: mass in kg per anchor; stiffness k in N per unit strain (spring constant k / l in N/m);
 damping d in N·s per unit strain rate (the dashpot constant is d / l in N·s/m); friction f is the
 Coulomb coefficient (dimensionless); gravity in m/s²; lengths in metres.
 """

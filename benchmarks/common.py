@@ -1,0 +1,48 @@
+"""Shared benchmark helpers: a description of the machine, and CUDA-aware timing."""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+from collections.abc import Callable
+
+import torch
+
+
+def machine_description(device: str) -> str:
+    """CPU model, core count, torch version and GPU name, for the benchmark record."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    parts = [
+        f"CPU: {cpu} ({os.cpu_count()} cores, torch threads {torch.get_num_threads()})",
+        f"torch {torch.__version__}",
+    ]
+    if device.startswith("cuda"):
+        parts.append(f"GPU: {torch.cuda.get_device_name()} (CUDA {torch.version.cuda})")
+    return "; ".join(parts)
+
+
+def timed(fn: Callable[[], object], device: str, repeats: int = 3) -> float:
+    """Best wall-clock seconds of ``repeats`` calls after one warm-up (synchronising CUDA)."""
+
+    def sync():
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+
+    fn()
+    sync()
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        sync()
+        best = min(best, time.perf_counter() - start)
+    return best
