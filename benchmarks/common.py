@@ -27,6 +27,12 @@ def machine_description(device: str) -> str:
     ]
     if device.startswith("cuda"):
         parts.append(f"GPU: {torch.cuda.get_device_name()} (CUDA {torch.version.cuda})")
+        try:
+            import gsplat
+
+            parts.append(f"gsplat {gsplat.__version__}")
+        except ImportError:
+            parts.append("gsplat not installed")
     return "; ".join(parts)
 
 
