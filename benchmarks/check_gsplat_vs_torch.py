@@ -17,7 +17,8 @@ import sys
 import time
 
 import torch
-from bench_renderer import machine_description, random_object
+from bench_renderer import random_object
+from common import machine_description
 
 from reconphys.render import Cameras, dataset_views
 from reconphys.render.gsplat_backend import rasterize_gsplat
