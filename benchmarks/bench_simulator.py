@@ -1,10 +1,12 @@
-"""Simulator throughput: substeps per second of the plain PyTorch stepping (DESIGN §4).
+"""Simulator throughput: substeps per second of each rollout method, measured in one run.
 
 Objects are balls of volume anchors (0.5 m across) with K-nearest-neighbour springs, falling onto
 the ground with mid-range attributes. "forward" runs substeps without autograd; "fwd+bwd" runs the
 same substeps with gradients on (m, k, d, f, initial velocity) and back-propagates a loss on the
-final positions. One row per (B scenes, N_A anchors, K neighbours); substeps/s counts substeps of
-the whole batch (a batch of 8 doing 1 substep counts 1).
+final positions. Methods (see ``reconphys.physics.rollout``): ``autograd`` (the plain reference),
+``adjoint`` (same forward, hand-written backward), ``fused`` (Triton kernels, CUDA only). The
+forward of ``autograd`` and ``adjoint`` is the same code, so it is timed once ("torch"). One row
+per (B scenes, N_A anchors, K neighbours); substeps/s count substeps of the whole batch.
 
     python benchmarks/bench_simulator.py                   # CPU, and CUDA if available
     python benchmarks/bench_simulator.py --device cpu --quick
@@ -19,13 +21,14 @@ import math
 import torch
 from common import machine_description, timed
 
-from reconphys.physics import SpringMassModel, State, knn_springs, sample_volume_anchors, step
+from reconphys.physics import SpringMassModel, State, knn_springs, rollout, sample_volume_anchors
+from reconphys.physics.fused import fused_usable
 
-CONFIGS = {
-    "cpu": [(1, 512, 16), (1, 2048, 16), (1, 2048, 32), (8, 2048, 32)],
-    "cuda": [(b, n, k) for b in (1, 8, 32) for n in (512, 2048) for k in (16, 32)],
-}
+GRID = [(b, n, k) for b in (1, 8, 32) for n in (512, 2048) for k in (16, 32)]
+CONFIGS = {"cpu": GRID, "cuda": GRID}
 QUICK = {"cpu": [(1, 2048, 32)], "cuda": [(1, 2048, 32), (8, 2048, 32)]}
+# Autograd keeps every substep's intermediates: cap its backward timing to this many substeps.
+AUTOGRAD_BACKWARD_SUBSTEPS = {"cpu": 10, "cuda": 50}
 
 
 def ball(num_anchors: int, seed: int = 0) -> torch.Tensor:
@@ -51,34 +54,38 @@ def make_system(batch: int, num_anchors: int, neighbors: int, device: str, grad:
     return model, State(x0.to(device), v0), params, springs.shape[0]
 
 
+def substeps_per_second(config, device, substeps, method, backward) -> float:
+    batch, num_anchors, neighbors = config
+    model, state, *_ = make_system(batch, num_anchors, neighbors, device, backward)
+
+    def rollout_once():
+        with torch.set_grad_enabled(backward):
+            traj = rollout(model, state, 1, substeps=substeps, method=method)
+            if backward:
+                traj.x[:, -1, :, 2].sum().backward()
+
+    return substeps / timed(rollout_once, device, repeats=2)
+
+
 def run(device: str, configs, substeps: int) -> list[dict]:
+    fused = fused_usable(torch.device(device))
     rows = []
-    h = 0.03 / 100
-    for batch, num_anchors, neighbors in configs:
+    for config in configs:
+        batch, num_anchors, neighbors = config
         row = {"B": batch, "N_A": num_anchors, "K": neighbors}
-        for mode in ("forward", "fwd+bwd"):
-            grad = mode == "fwd+bwd"
-            model, state, params, num_springs = make_system(
-                batch, num_anchors, neighbors, device, grad
-            )
-            row["E"] = num_springs
-
-            def rollout_once(model=model, state=state, params=params, grad=grad):
-                s = state
-                with torch.set_grad_enabled(grad):
-                    for _ in range(substeps):
-                        s = step(model, s, h)
-                    if grad:
-                        s.x[..., 2].sum().backward()
-
-            seconds = timed(rollout_once, device, repeats=2)
-            row[mode] = substeps / seconds
-        rows.append(row)
-        print(
-            f"  B={batch:<3d} N_A={num_anchors:<5d} K={neighbors:<3d} E={row['E']:<7d} "
-            f"forward {row['forward']:>10,.0f}/s   fwd+bwd {row['fwd+bwd']:>10,.0f}/s",
-            flush=True,
+        row["E"] = knn_springs(ball(num_anchors), neighbors)[0].shape[0]
+        row["fwd torch"] = substeps_per_second(config, device, substeps, "autograd", False)
+        autograd_substeps = min(substeps, AUTOGRAD_BACKWARD_SUBSTEPS[device])
+        row["bwd autograd"] = substeps_per_second(
+            config, device, autograd_substeps, "autograd", True
         )
+        row["bwd adjoint"] = substeps_per_second(config, device, substeps, "adjoint", True)
+        if fused:
+            row["fwd fused"] = substeps_per_second(config, device, substeps, "fused", False)
+            row["bwd fused"] = substeps_per_second(config, device, substeps, "fused", True)
+        rows.append(row)
+        cells = "  ".join(f"{k} {v:>9,.0f}/s" for k, v in row.items() if isinstance(v, float))
+        print(f"  B={batch:<3d} N_A={num_anchors:<5d} K={neighbors:<3d} {cells}", flush=True)
     return rows
 
 
@@ -95,21 +102,31 @@ def main() -> None:
         print("(no CUDA device: CPU only)")
     for device in devices:
         configs = (QUICK if args.quick else CONFIGS)[device]
-        substeps = args.substeps or (100 if device == "cpu" else 400)
+        substeps = args.substeps or (20 if device == "cpu" else 200)
         print(f"\n## simulator, {device}: {machine_description(device)}")
         print(f"{datetime.date.today()}, {substeps} substeps per timing, best of 2, float32")
+        print(f"(autograd fwd+bwd timed over {AUTOGRAD_BACKWARD_SUBSTEPS[device]} substeps)")
         rows = run(device, configs, substeps)
-        print(
-            "\n| B | N_A | K | springs | forward substeps/s | fwd+bwd substeps/s | fwd/bwd ratio |"
-        )
-        print("|---|---|---|---|---|---|---|")
+        columns = [c for c in ("fwd torch", "fwd fused", "bwd autograd", "bwd adjoint", "bwd fused")
+                   if c in rows[0]]  # fmt: skip
+        titles = {
+            "fwd torch": "forward, torch",
+            "fwd fused": "forward, fused",
+            "bwd autograd": "fwd+bwd, autograd",
+            "bwd adjoint": "fwd+bwd, adjoint",
+            "bwd fused": "fwd+bwd, fused",
+        }
+        print("\nsubsteps/s (whole batch); ratios against the autograd reference of the same run")
+        print("| B | N_A | K | springs | " + " | ".join(titles[c] for c in columns) + " |")
+        print("|---|---|---|---|" + "---|" * len(columns))
         for r in rows:
-            ratio = r["forward"] / r["fwd+bwd"]
-            print(
-                f"| {r['B']} | {r['N_A']} | {r['K']} | {r['E']} | {r['forward']:,.0f} | "
-                f"{r['fwd+bwd']:,.0f} | {ratio:.1f} |"
-            )
-        assert all(math.isfinite(r["forward"]) for r in rows)
+            cells = []
+            for c in columns:
+                base = r["fwd torch"] if c.startswith("fwd") else r["bwd autograd"]
+                ratio = "" if c in ("fwd torch", "bwd autograd") else f" ({r[c] / base:.1f}×)"
+                cells.append(f"{r[c]:,.0f}{ratio}")
+            print(f"| {r['B']} | {r['N_A']} | {r['K']} | {r['E']} | " + " | ".join(cells) + " |")
+        assert all(math.isfinite(r["fwd torch"]) for r in rows)
 
 
 if __name__ == "__main__":

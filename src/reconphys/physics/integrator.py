@@ -9,6 +9,7 @@ frames with a substep count taken from :func:`stable_substeps`.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import torch
@@ -221,6 +222,39 @@ def stable_substeps(
     return max(int(min_substeps), math.ceil(frame_dt / h - 1e-9))
 
 
+METHODS = ("auto", "autograd", "adjoint", "fused")
+
+
+def choose_method(
+    method: str, model: SpringMassModel, state: State, control: Control | None = None
+) -> str:
+    """Resolve ``method="auto"`` (see :func:`rollout`) and check an explicit choice."""
+    from .fused import fused_usable
+
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    if method == "auto":
+        method = os.environ.get("RECONPHYS_SIMULATOR", "auto")
+        if method not in METHODS:
+            raise ValueError(f"RECONPHYS_SIMULATOR: expected one of {METHODS}, got {method!r}")
+    if control is not None and control.force is not None:
+        if method not in ("auto", "autograd"):
+            raise ValueError(f"method {method!r} does not take a control force; use 'autograd'")
+        return "autograd"
+    if method == "fused" and not fused_usable(state.x.device):
+        raise ValueError(
+            "method 'fused' needs Triton and a CUDA device (or TRITON_INTERPRET=1 on CPU)"
+        )
+    if method != "auto":
+        return method
+    if state.x.is_cuda and fused_usable(state.x.device):
+        return "fused"
+    tensors = [state.x, state.v, model.rest_length, model.mass, model.stiffness]
+    tensors += [model.damping, model.friction]
+    needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
+    return "adjoint" if needs_grad else "autograd"
+
+
 @dataclass
 class Trajectory:
     x: Tensor  # [B, T+1, N_A, 3] positions at each frame boundary, frame 0 = initial state
@@ -238,15 +272,40 @@ def rollout(
     substeps: int | None = None,
     control: Control | None = None,
     progress: bool = False,
+    method: str = "auto",
 ) -> Trajectory:
     """Simulate ``num_frames`` frames and keep the state at every frame boundary.
 
     ``substeps`` forces an exact count (the caller is then responsible for stability); by default
-    it is :func:`stable_substeps` with ``min_substeps`` as the floor. Gradients flow through every
-    substep to the attributes, rest lengths and initial state.
+    it is :func:`stable_substeps` with ``min_substeps`` as the floor: the stiffest, most damped
+    scene of the batch decides. Gradients flow through every substep to the attributes, rest
+    lengths and initial state.
+
+    ``method`` (all give the same trajectory and gradients up to float round-off):
+
+    - ``"autograd"``: the plain reference, autograd through every :func:`step`; memory grows with
+      frames × substeps; the only method that takes a ``control``.
+    - ``"adjoint"``: the same forward, with the hand-written exact backward of
+      :mod:`reconphys.physics.adjoint` (memory O(frames + substeps)).
+    - ``"fused"``: the Triton kernels of :mod:`reconphys.physics.fused` with the same backward
+      (CUDA; on CPU only under Triton's interpreter, for tests).
+    - ``"auto"``: ``"fused"`` on CUDA when Triton is installed, else ``"adjoint"`` when a gradient
+      is needed, else ``"autograd"``; with a ``control``, always ``"autograd"``. The environment
+      variable ``RECONPHYS_SIMULATOR`` (one of the names above) overrides the automatic choice,
+      e.g. ``RECONPHYS_SIMULATOR=autograd`` forces the fast path off.
     """
     if substeps is None:
         substeps = stable_substeps(model, state.x, frame_dt, min_substeps)
+    method = choose_method(method, model, state, control)
+    batch = max(state.x.shape[0], state.v.shape[0], model.batch_size)
+    state = State(state.x.expand(batch, -1, -1), state.v.expand(batch, -1, -1))
+    if method != "autograd":
+        from .adjoint import TorchEngine, rollout_adjoint
+        from .fused import FusedEngine
+
+        engine = FusedEngine if method == "fused" else TorchEngine
+        xs, vs = rollout_adjoint(model, state, num_frames, substeps, frame_dt, engine, progress)
+        return Trajectory(xs, vs, substeps, frame_dt)
     h = frame_dt / substeps
     xs, vs = [state.x], [state.v]
     frames = range(num_frames)
