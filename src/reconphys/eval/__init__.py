@@ -1,0 +1,1 @@
+"""Evaluation: metrics (DESIGN §9), methods and reports."""
