@@ -4,7 +4,8 @@ Objects are balls of volume anchors (0.5 m across) with K-nearest-neighbour spri
 the ground with mid-range attributes. "forward" runs substeps without autograd; "fwd+bwd" runs the
 same substeps with gradients on (m, k, d, f, initial velocity) and back-propagates a loss on the
 final positions. Methods (see ``reconphys.physics.rollout``): ``autograd`` (the plain reference),
-``adjoint`` (same forward, hand-written backward), ``fused`` (Triton kernels, CUDA only). The
+``adjoint`` (same forward, hand-written backward), ``numba`` (compiled CPU substeps, forward
+only), ``fused`` (Triton kernels, CUDA only). The
 forward of ``autograd`` and ``adjoint`` is the same code, so it is timed once ("torch"). One row
 per (B scenes, N_A anchors, K neighbours); substeps/s count substeps of the whole batch.
 
@@ -22,6 +23,7 @@ import torch
 from common import machine_description, timed
 
 from reconphys.physics import SpringMassModel, State, knn_springs, rollout, sample_volume_anchors
+from reconphys.physics.cpu_kernels import numba_available
 from reconphys.physics.fused import fused_usable
 
 GRID = [(b, n, k) for b in (1, 8, 32) for n in (512, 2048) for k in (16, 32)]
@@ -75,6 +77,8 @@ def run(device: str, configs, substeps: int) -> list[dict]:
         row = {"B": batch, "N_A": num_anchors, "K": neighbors}
         row["E"] = knn_springs(ball(num_anchors), neighbors)[0].shape[0]
         row["fwd torch"] = substeps_per_second(config, device, substeps, "autograd", False)
+        if device == "cpu" and numba_available():
+            row["fwd numba"] = substeps_per_second(config, device, substeps, "numba", False)
         autograd_substeps = min(substeps, AUTOGRAD_BACKWARD_SUBSTEPS[device])
         row["bwd autograd"] = substeps_per_second(
             config, device, autograd_substeps, "autograd", True
@@ -107,10 +111,11 @@ def main() -> None:
         print(f"{datetime.date.today()}, {substeps} substeps per timing, best of 2, float32")
         print(f"(autograd fwd+bwd timed over {AUTOGRAD_BACKWARD_SUBSTEPS[device]} substeps)")
         rows = run(device, configs, substeps)
-        columns = [c for c in ("fwd torch", "fwd fused", "bwd autograd", "bwd adjoint", "bwd fused")
-                   if c in rows[0]]  # fmt: skip
+        names = ("fwd torch", "fwd numba", "fwd fused", "bwd autograd", "bwd adjoint", "bwd fused")
+        columns = [c for c in names if c in rows[0]]
         titles = {
             "fwd torch": "forward, torch",
+            "fwd numba": "forward, numba",
             "fwd fused": "forward, fused",
             "bwd autograd": "fwd+bwd, autograd",
             "bwd adjoint": "fwd+bwd, adjoint",

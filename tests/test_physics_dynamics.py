@@ -18,8 +18,18 @@ from reconphys.physics import (
     spring_energy,
     stable_substeps,
 )
+from reconphys.physics.cpu_kernels import numba_available
 
 G = 9.8
+
+
+@pytest.fixture(autouse=True, params=["autograd", "numba"])
+def simulator(request, monkeypatch):
+    """Every dynamics test runs on the plain reference and on the compiled CPU substeps."""
+    if request.param == "numba" and not numba_available():
+        pytest.skip("needs Numba")
+    monkeypatch.setenv("RECONPHYS_SIMULATOR", request.param)
+    return request.param
 
 
 def make_model(springs, rest, m, k, d, f, **kwargs) -> SpringMassModel:
@@ -191,5 +201,7 @@ def test_cuda_matches_cpu(ball_anchors):
     state = State(x0[None], torch.zeros_like(x0)[None])
     model = make_model(springs, rest, 0.5, 300.0, 1.0, 0.5)
     cpu = rollout(model, state, num_frames=5, substeps=40)
-    gpu = rollout(model.to("cuda"), State(state.x.cuda(), state.v.cuda()), 5, substeps=40)
+    gpu = rollout(
+        model.to("cuda"), State(state.x.cuda(), state.v.cuda()), 5, substeps=40, method="autograd"
+    )
     assert torch.allclose(cpu.x, gpu.x.cpu(), atol=1e-9)

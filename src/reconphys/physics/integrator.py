@@ -222,7 +222,7 @@ def stable_substeps(
     return max(int(min_substeps), math.ceil(frame_dt / h - 1e-9))
 
 
-METHODS = ("auto", "autograd", "adjoint", "fused")
+METHODS = ("auto", "autograd", "adjoint", "fused", "numba")
 
 
 def choose_method(
@@ -237,21 +237,31 @@ def choose_method(
         method = os.environ.get("RECONPHYS_SIMULATOR", "auto")
         if method not in METHODS:
             raise ValueError(f"RECONPHYS_SIMULATOR: expected one of {METHODS}, got {method!r}")
-    if control is not None and control.force is not None:
-        if method not in ("auto", "autograd"):
-            raise ValueError(f"method {method!r} does not take a control force; use 'autograd'")
-        return "autograd"
+    from .cpu_kernels import numba_available
+
+    tensors = [state.x, state.v, model.rest_length, model.mass, model.stiffness]
+    tensors += [model.damping, model.friction]
+    needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
+    has_control = control is not None and control.force is not None
+    if method in ("adjoint", "fused") and has_control:
+        raise ValueError(f"method {method!r} does not take a control force; use 'autograd'")
     if method == "fused" and not fused_usable(state.x.device):
         raise ValueError(
             "method 'fused' needs Triton and a CUDA device (or TRITON_INTERPRET=1 on CPU)"
         )
+    if method == "numba":
+        if not numba_available():
+            raise ValueError("method 'numba' needs Numba (pip install numba)")
+        if state.x.is_cuda or needs_grad:
+            raise ValueError("method 'numba' runs on CPU without gradients")
     if method != "auto":
         return method
+    if not state.x.is_cuda and not needs_grad and numba_available():
+        return "numba"
+    if has_control:
+        return "autograd"
     if state.x.is_cuda and fused_usable(state.x.device):
         return "fused"
-    tensors = [state.x, state.v, model.rest_length, model.mass, model.stiffness]
-    tensors += [model.damping, model.friction]
-    needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
     return "adjoint" if needs_grad else "autograd"
 
 
@@ -289,8 +299,11 @@ def rollout(
       :mod:`reconphys.physics.adjoint` (memory O(frames + substeps)).
     - ``"fused"``: the Triton kernels of :mod:`reconphys.physics.fused` with the same backward
       (CUDA; on CPU only under Triton's interpreter, for tests).
-    - ``"auto"``: ``"fused"`` on CUDA when Triton is installed, else ``"adjoint"`` when a gradient
-      is needed, else ``"autograd"``; with a ``control``, always ``"autograd"``. The environment
+    - ``"numba"``: compiled CPU substeps of :mod:`reconphys.physics.cpu_kernels`, forward only
+      (CPU, no gradient); takes a ``control``.
+    - ``"auto"``: on CPU without a gradient ``"numba"`` (when Numba is installed); else
+      ``"autograd"`` with a ``control``; ``"fused"`` on CUDA when Triton is installed; else
+      ``"adjoint"`` when a gradient is needed, else ``"autograd"``. The environment
       variable ``RECONPHYS_SIMULATOR`` (one of the names above) overrides the automatic choice,
       e.g. ``RECONPHYS_SIMULATOR=autograd`` forces the fast path off.
     """
@@ -299,6 +312,12 @@ def rollout(
     method = choose_method(method, model, state, control)
     batch = max(state.x.shape[0], state.v.shape[0], model.batch_size)
     state = State(state.x.expand(batch, -1, -1), state.v.expand(batch, -1, -1))
+    if method == "numba":
+        from .cpu_kernels import CompiledRollout
+
+        return _rollout_compiled(
+            CompiledRollout(model, state, substeps, frame_dt), state, num_frames, control, progress
+        )
     if method != "autograd":
         from .adjoint import TorchEngine, rollout_adjoint
         from .fused import FusedEngine
@@ -319,6 +338,23 @@ def rollout(
         xs.append(state.x)
         vs.append(state.v)
     return Trajectory(torch.stack(xs, 1), torch.stack(vs, 1), substeps, frame_dt)
+
+
+def _rollout_compiled(runner, state: State, num_frames: int, control, progress) -> Trajectory:
+    force = control.force if control is not None else None
+    xs, vs = [state.x.detach().cpu()], [state.v.detach().cpu()]
+    frames = range(num_frames)
+    if progress:
+        from tqdm.auto import tqdm
+
+        frames = tqdm(frames, desc=f"simulate ({runner.substeps} substeps/frame)", unit="frame")
+    for _ in frames:
+        new = runner.frame(force)
+        xs.append(new.x)
+        vs.append(new.v)
+    x = torch.stack(xs, 1).to(state.x.dtype)
+    v = torch.stack(vs, 1).to(state.v.dtype)
+    return Trajectory(x, v, runner.substeps, runner.frame_dt)
 
 
 def kinetic_energy(

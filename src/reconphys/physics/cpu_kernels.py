@@ -1,0 +1,182 @@
+"""Compiled CPU substeps (Numba): the forward-only fast twin of ``integrator.step`` on CPU.
+
+The viewer, the demo and ``simulate`` run long forward rollouts on CPUs, where the plain PyTorch
+step spends most of its time in per-op dispatch and temporaries (~15 tensors of [B, E, 3] per
+substep). Here a whole frame of substeps runs inside one compiled function: springs are split
+into one chunk per thread, each thread accumulates its forces into its own buffer (no atomics),
+then anchors are integrated in parallel. Same equations as :func:`integrator.step` (same clamps
+and ground contact); results differ from it by float round-off (summation order).
+
+No autograd: ``rollout`` uses this path only when no gradient is needed (``method="auto"`` on CPU
+with gradients off, or ``method="numba"``). ``tests/test_physics_cpu_kernels.py`` compares it with
+the PyTorch reference; ``benchmarks/bench_simulator.py`` measures both in one run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from .model import SpringMassModel
+from .state import State
+
+try:  # Numba is optional: the PyTorch path is used wherever it is missing.
+    import numba
+except ImportError:  # pragma: no cover - depends on the machine
+    numba = None
+
+
+def numba_available() -> bool:
+    return numba is not None
+
+
+def _frame_py(x, v, springs, rest, k, d, mass, friction, external, params, substeps, buffers):
+    """Advance x, v [B, N, 3] in place by ``substeps`` substeps.
+
+    springs [B, E, 2] int64, rest/k/d [B, E], mass/friction [B, N], external [B, N, 3] force
+    (N) held over the substeps, params = (p, e, g0, g1, g2, ground, h), buffers [B, T, N, 3]
+    scratch: the springs of each scene are split into T chunks, each with its own force buffer.
+    """
+    p, e, g0, g1, g2, ground, h = (
+        params[0], params[1], params[2], params[3], params[4], params[5], params[6],
+    )  # fmt: skip
+    batch, num_anchors = x.shape[0], x.shape[1]
+    num_springs = springs.shape[1]
+    chunks = buffers.shape[1]
+    chunk = (num_springs + chunks - 1) // chunks
+    for _ in range(substeps):
+        for task in numba.prange(batch * chunks):
+            b = task // chunks
+            c = task % chunks
+            buf = buffers[b, c]
+            buf[:] = 0.0
+            for s in range(c * chunk, min(num_springs, (c + 1) * chunk)):
+                i = springs[b, s, 0]
+                j = springs[b, s, 1]
+                dx0 = x[b, j, 0] - x[b, i, 0]
+                dx1 = x[b, j, 1] - x[b, i, 1]
+                dx2 = x[b, j, 2] - x[b, i, 2]
+                length = np.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2 + 1e-24)
+                u0 = dx0 / length
+                u1 = dx1 / length
+                u2 = dx2 / length
+                r = rest[b, s]
+                strain = length / r - 1.0
+                magnitude = k[b, s] * strain
+                if p == 0.5:
+                    magnitude *= np.sqrt(1.0 + abs(strain))
+                elif p != 0.0:
+                    magnitude *= (1.0 + abs(strain)) ** p
+                closing = (
+                    (v[b, j, 0] - v[b, i, 0]) * u0
+                    + (v[b, j, 1] - v[b, i, 1]) * u1
+                    + (v[b, j, 2] - v[b, i, 2]) * u2
+                )
+                magnitude += d[b, s] / r * closing
+                f0 = magnitude * u0
+                f1 = magnitude * u1
+                f2 = magnitude * u2
+                buf[i, 0] += f0
+                buf[i, 1] += f1
+                buf[i, 2] += f2
+                buf[j, 0] -= f0
+                buf[j, 1] -= f1
+                buf[j, 2] -= f2
+        for task in numba.prange(batch * num_anchors):
+            b = task // num_anchors
+            n = task % num_anchors
+            f0 = external[b, n, 0]
+            f1 = external[b, n, 1]
+            f2 = external[b, n, 2]
+            for c in range(chunks):
+                f0 += buffers[b, c, n, 0]
+                f1 += buffers[b, c, n, 1]
+                f2 += buffers[b, c, n, 2]
+            m = mass[b, n]
+            vf0 = v[b, n, 0] + (f0 / m + g0) * h
+            vf1 = v[b, n, 1] + (f1 / m + g1) * h
+            vf2 = v[b, n, 2] + (f2 / m + g2) * h
+            xf0 = x[b, n, 0] + vf0 * h
+            xf1 = x[b, n, 1] + vf1 * h
+            xf2 = x[b, n, 2] + vf2 * h
+            if xf2 < ground:
+                approach = min(vf2, 0.0)
+                speed = np.sqrt(vf0 * vf0 + vf1 * vf1 + 1e-30)
+                retained = max(1.0 + friction[b, n] * ((1.0 + e) * approach) / speed, 0.0)
+                vt0 = vf0 * retained
+                vt1 = vf1 * retained
+                x[b, n, 0] = xf0 - h * (vf0 - vt0)
+                x[b, n, 1] = xf1 - h * (vf1 - vt1)
+                x[b, n, 2] = ground
+                v[b, n, 0] = vt0
+                v[b, n, 1] = vt1
+                v[b, n, 2] = vf2 - (1.0 + e) * approach
+            else:
+                x[b, n, 0] = xf0
+                x[b, n, 1] = xf1
+                x[b, n, 2] = xf2
+                v[b, n, 0] = vf0
+                v[b, n, 1] = vf1
+                v[b, n, 2] = vf2
+
+
+if numba is not None:
+    # One function, compiled twice: threads pay off only when there is enough work per substep.
+    _frame_parallel = numba.njit(parallel=True, cache=True)(_frame_py)
+    _frame_serial = numba.njit(parallel=False, cache=True)(_frame_py)
+
+# Springs × scenes per substep below which the serial version is faster (thread wake-up costs
+# more than it saves); measured on the 2-core CI machine, see docs/benchmarks.md.
+PARALLEL_MIN_SPRINGS = 16_384
+
+
+def _array(t: Tensor, shape: tuple[int, ...], dtype) -> np.ndarray:
+    return np.ascontiguousarray(np.broadcast_to(t.detach().cpu().numpy().astype(dtype), shape))
+
+
+class CompiledRollout:
+    """Frame-by-frame forward rollout with :func:`_frame` (CPU, float32 or float64, no grad)."""
+
+    def __init__(self, model: SpringMassModel, state: State, substeps: int, frame_dt: float):
+        if numba is None:
+            raise RuntimeError("the compiled CPU simulator needs Numba (pip install numba)")
+        batch, num_anchors = state.x.shape[:2]
+        num_springs = model.num_springs
+        dtype = np.float64 if model.dtype == torch.float64 else np.float32
+        self.dtype, self.torch_dtype = dtype, model.dtype
+        self.x = state.x.detach().cpu().numpy().astype(dtype, copy=True)
+        self.v = state.v.detach().cpu().numpy().astype(dtype, copy=True)
+        springs = model.springs if model.springs.dim() == 3 else model.springs[None]
+        self.springs = _array(springs, (batch, num_springs, 2), np.int64)
+        rest = model.rest_length if model.rest_length.dim() == 2 else model.rest_length[None]
+        self.rest = _array(rest, (batch, num_springs), dtype)
+        self.k = _array(model.stiffness, (batch, num_springs), dtype)
+        self.d = _array(model.damping, (batch, num_springs), dtype)
+        self.mass = _array(model.mass, (batch, num_anchors), dtype)
+        self.friction = _array(model.friction, (batch, num_anchors), dtype)
+        h = frame_dt / substeps
+        gravity = model.gravity
+        self.params = np.array(
+            [model.spring_exponent, model.restitution, *gravity, model.ground_height, h],
+            dtype=dtype,
+        )
+        self.substeps, self.frame_dt = substeps, frame_dt
+        parallel = batch * num_springs >= PARALLEL_MIN_SPRINGS and numba.get_num_threads() > 1
+        chunks = numba.get_num_threads() if parallel else 1
+        self.kernel = _frame_parallel if parallel else _frame_serial
+        self.buffers = np.zeros((batch, chunks, num_anchors, 3), dtype=dtype)
+        self.no_force = np.zeros_like(self.x)
+
+    def frame(self, force: Tensor | None = None) -> State:
+        """Advance one frame (``force`` [B, N_A, 3] N, external, held constant over the frame);
+        returns the new state as CPU tensors."""
+        if force is None:
+            external = self.no_force
+        else:
+            external = _array(force, self.x.shape, self.dtype)
+        self.kernel(
+            self.x, self.v, self.springs, self.rest, self.k, self.d, self.mass, self.friction,
+            external, self.params, self.substeps, self.buffers,
+        )  # fmt: skip
+        return State(torch.from_numpy(self.x.copy()), torch.from_numpy(self.v.copy()))
