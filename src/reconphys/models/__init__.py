@@ -1,0 +1,1 @@
+"""Networks: the physics predictor (video → attributes); the 3DGS predictor follows (DESIGN §8)."""

@@ -1,0 +1,218 @@
+"""Physics predictor (DESIGN §8, paper §3.3): video frames of one view → (m, k, d, f).
+
+Per-frame encoder → spatio-temporal trunk (3D residual blocks over [time, height, width], then
+self-attention over time) → MLP → four bounded attributes, one value each per object.
+
+Bounded outputs: mass, stiffness and damping span one to two orders of magnitude, so they are
+mapped log-uniformly into the DESIGN §5 ranges, ``exp(log lo + σ(z) (log hi − log lo))``;
+friction is ``σ(z)`` in [0, 1]. :func:`normalize_attributes` is the inverse map to [0, 1]⁴, the
+space of the supervised loss. (The reference code maps linearly and lets friction reach 2.4; we
+keep the data's ranges so that every prediction is a valid, stable simulator input.)
+
+Encoders are looked up by name in :data:`ENCODERS`; the default ``small_cnn`` is trained from
+scratch. Pretrained encoders (timm, transformers) register here too and load from local files.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import torch
+from torch import Tensor, nn
+
+from ..physics.model import ATTRIBUTE_RANGES
+
+ATTRIBUTE_ORDER = ("mass", "stiffness", "damping", "friction")
+LOG_SCALED = ("mass", "stiffness", "damping")
+
+
+@dataclass
+class PredictorConfig:
+    encoder: str = "small_cnn"
+    encoder_channels: tuple[int, ...] = (32, 64, 128, 128)  # one stride-2 stage each
+    token_channels: int = 64  # channels of the spatio-temporal trunk
+    trunk_blocks: int = 2  # 3D residual blocks
+    attention_heads: int = 4
+    mlp_hidden: tuple[int, ...] = (256, 128)
+    num_frames: int = 20  # frames the predictor reads (frames 0..num_frames-1)
+    resolution: int = 64  # square input size in pixels
+    extra: dict = field(default_factory=dict)  # encoder-specific options
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> PredictorConfig:
+        data = dict(data)
+        for key in ("encoder_channels", "mlp_hidden"):
+            if key in data:
+                data[key] = tuple(data[key])
+        return cls(**data)
+
+
+# --- encoders -------------------------------------------------------------------------------
+
+ENCODERS: dict[str, Callable[[PredictorConfig], nn.Module]] = {}
+
+
+def register_encoder(name: str):
+    """Decorator: ``ENCODERS[name] = factory(config) -> module``; the module maps images
+    [N, 3, H, W] to feature maps [N, C, h, w] and has an ``out_channels`` attribute."""
+
+    def wrap(factory):
+        ENCODERS[name] = factory
+        return factory
+
+    return wrap
+
+
+def _group_norm(channels: int) -> nn.GroupNorm:
+    return nn.GroupNorm(min(8, channels), channels)
+
+
+class SmallCNN(nn.Module):
+    """Stride-2 conv stages with GroupNorm and SiLU: [N, 3, H, W] → [N, C, H/2^S, W/2^S]."""
+
+    def __init__(self, channels: tuple[int, ...]):
+        super().__init__()
+        layers, previous = [], 3
+        for c in channels:
+            layers += [
+                nn.Conv2d(previous, c, 3, stride=2, padding=1),
+                _group_norm(c),
+                nn.SiLU(),
+                nn.Conv2d(c, c, 3, padding=1),
+                _group_norm(c),
+                nn.SiLU(),
+            ]
+            previous = c
+        self.layers = nn.Sequential(*layers)
+        self.out_channels = previous
+
+    def forward(self, images: Tensor) -> Tensor:
+        return self.layers(images)
+
+
+@register_encoder("small_cnn")
+def _small_cnn(config: PredictorConfig) -> nn.Module:
+    return SmallCNN(config.encoder_channels)
+
+
+# --- trunk ----------------------------------------------------------------------------------
+
+
+class Residual3d(nn.Module):
+    """Bottleneck residual block over [B, C, T, h, w] (1×1×1 → 3×3×3 → 1×1×1)."""
+
+    def __init__(self, channels: int):
+        super().__init__()
+        inner = max(channels // 2, 8)
+        self.body = nn.Sequential(
+            nn.Conv3d(channels, inner, 1),
+            _group_norm(inner),
+            nn.SiLU(),
+            nn.Conv3d(inner, inner, 3, padding=1),
+            _group_norm(inner),
+            nn.SiLU(),
+            nn.Conv3d(inner, channels, 1),
+            _group_norm(channels),
+        )
+        self.act = nn.SiLU()
+
+    def forward(self, x: Tensor) -> Tensor:
+        return self.act(x + self.body(x))
+
+
+class TemporalAttention(nn.Module):
+    """Pre-norm self-attention over time plus an MLP, on tokens [B, T, C]."""
+
+    def __init__(self, channels: int, heads: int, num_frames: int):
+        super().__init__()
+        self.position = nn.Parameter(torch.zeros(1, num_frames, channels))
+        nn.init.normal_(self.position, std=0.02)
+        self.norm1 = nn.LayerNorm(channels)
+        self.attention = nn.MultiheadAttention(channels, heads, batch_first=True)
+        self.norm2 = nn.LayerNorm(channels)
+        self.mlp = nn.Sequential(
+            nn.Linear(channels, 2 * channels), nn.GELU(), nn.Linear(2 * channels, channels)
+        )
+
+    def forward(self, tokens: Tensor) -> Tensor:
+        x = tokens + self.position[:, : tokens.shape[1]]
+        h = self.norm1(x)
+        x = x + self.attention(h, h, h, need_weights=False)[0]
+        return x + self.mlp(self.norm2(x))
+
+
+# --- attribute bounds -----------------------------------------------------------------------
+
+
+def _bounds(name: str) -> tuple[float, float]:
+    low, high = ATTRIBUTE_RANGES[name]
+    if name in LOG_SCALED:
+        return math.log(low), math.log(high)
+    return low, high
+
+
+def attributes_from_unit(unit: Tensor) -> dict[str, Tensor]:
+    """[..., 4] in [0, 1] → {mass, stiffness, damping, friction} in the DESIGN §5 ranges."""
+    out = {}
+    for index, name in enumerate(ATTRIBUTE_ORDER):
+        low, high = _bounds(name)
+        value = low + unit[..., index] * (high - low)
+        out[name] = torch.exp(value) if name in LOG_SCALED else value
+    return out
+
+
+def normalize_attributes(attributes: dict[str, Tensor] | Tensor) -> Tensor:
+    """Inverse of :func:`attributes_from_unit`: attributes (dict, or [..., 4] in
+    ATTRIBUTE_ORDER) → [..., 4] in [0, 1] (clamped)."""
+    if isinstance(attributes, Tensor):
+        attributes = {n: attributes[..., i] for i, n in enumerate(ATTRIBUTE_ORDER)}
+    columns = []
+    for name in ATTRIBUTE_ORDER:
+        low, high = _bounds(name)
+        value = attributes[name]
+        value = torch.log(value) if name in LOG_SCALED else value
+        columns.append(((value - low) / (high - low)).clamp(0.0, 1.0))
+    return torch.stack(columns, -1)
+
+
+# --- the predictor --------------------------------------------------------------------------
+
+
+class PhysicsPredictor(nn.Module):
+    def __init__(self, config: PredictorConfig | None = None):
+        super().__init__()
+        self.config = config = config or PredictorConfig()
+        if config.encoder not in ENCODERS:
+            raise ValueError(f"encoder: unknown {config.encoder!r}; known: {sorted(ENCODERS)}")
+        self.encoder = ENCODERS[config.encoder](config)
+        c = config.token_channels
+        self.project = nn.Conv3d(self.encoder.out_channels, c, 1)
+        self.trunk = nn.Sequential(*[Residual3d(c) for _ in range(config.trunk_blocks)])
+        self.temporal = TemporalAttention(c, config.attention_heads, config.num_frames)
+        layers, previous = [], c
+        for width in config.mlp_hidden:
+            layers += [nn.Linear(previous, width), nn.GELU()]
+            previous = width
+        layers.append(nn.Linear(previous, len(ATTRIBUTE_ORDER)))
+        self.head = nn.Sequential(*layers)
+
+    def forward(self, frames: Tensor) -> dict[str, Tensor]:
+        """frames [B, T, H, W, 3] in [0, 1] (one view; T ≤ num_frames, H = W = resolution) →
+        {"unit": [B, 4] in (0, 1), "mass", "stiffness", "damping", "friction": [B]}."""
+        if frames.dim() != 5 or frames.shape[-1] != 3:
+            raise ValueError(f"frames: expected [B, T, H, W, 3], got {list(frames.shape)}")
+        b, t, h, w, _ = frames.shape
+        if t > self.config.num_frames:
+            raise ValueError(f"frames: at most {self.config.num_frames} frames, got {t}")
+        images = frames.reshape(b * t, h, w, 3).permute(0, 3, 1, 2)
+        features = self.encoder(images)  # [B·T, C, h', w']
+        features = features.reshape(b, t, *features.shape[1:]).transpose(1, 2)  # [B, C, T, h', w']
+        tokens = self.trunk(self.project(features)).mean((-2, -1)).transpose(1, 2)  # [B, T, C]
+        pooled = self.temporal(tokens).mean(1)
+        unit = torch.sigmoid(self.head(pooled))
+        return {"unit": unit, **attributes_from_unit(unit)}

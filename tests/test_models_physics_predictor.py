@@ -1,0 +1,82 @@
+"""Physics predictor: shapes, bounds, invertible attribute normalisation, gradients."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from reconphys.models.physics_predictor import (
+    ATTRIBUTE_ORDER,
+    ENCODERS,
+    PhysicsPredictor,
+    PredictorConfig,
+    attributes_from_unit,
+    normalize_attributes,
+)
+from reconphys.physics.model import ATTRIBUTE_RANGES
+
+TINY = PredictorConfig(
+    encoder_channels=(8, 16), token_channels=16, trunk_blocks=1, attention_heads=2,
+    mlp_hidden=(32,), num_frames=6, resolution=32,
+)  # fmt: skip
+
+
+def test_outputs_lie_in_the_attribute_ranges():
+    torch.manual_seed(0)
+    model = PhysicsPredictor(TINY)
+    frames = torch.rand(3, 6, 32, 32, 3)
+    out = model(frames)
+    assert out["unit"].shape == (3, 4)
+    for name in ATTRIBUTE_ORDER:
+        low, high = ATTRIBUTE_RANGES[name]
+        assert out[name].shape == (3,)
+        assert (out[name] >= low).all() and (out[name] <= high).all(), name
+
+
+def test_extreme_logits_reach_the_range_ends():
+    ends = attributes_from_unit(torch.tensor([[0.0] * 4, [1.0] * 4], dtype=torch.float64))
+    for name in ATTRIBUTE_ORDER:
+        low, high = ATTRIBUTE_RANGES[name]
+        assert ends[name].tolist() == pytest.approx([low, high], rel=1e-12), name
+
+
+def test_normalisation_inverts_the_bounded_map():
+    unit = torch.rand(50, 4, dtype=torch.float64)
+    back = normalize_attributes(attributes_from_unit(unit))
+    torch.testing.assert_close(back, unit, rtol=0, atol=1e-12)
+    # the log-uniform midpoint of mass is the geometric mean of the range
+    mid = attributes_from_unit(torch.full((1, 4), 0.5, dtype=torch.float64))
+    assert mid["mass"].item() == pytest.approx((0.2 * 6.0) ** 0.5)
+
+
+def test_gradient_reaches_every_parameter():
+    torch.manual_seed(1)
+    model = PhysicsPredictor(TINY)
+    out = model(torch.rand(2, 6, 32, 32, 3))
+    (out["stiffness"].log().sum() + out["friction"].sum()).backward()
+    missing = [n for n, p in model.named_parameters() if p.grad is None or not p.grad.abs().sum()]
+    assert not missing, missing
+
+
+def test_fewer_frames_and_batch_independence():
+    torch.manual_seed(2)
+    model = PhysicsPredictor(TINY).eval()
+    frames = torch.rand(2, 4, 32, 32, 3)
+    both = model(frames)["unit"]
+    one = model(frames[1:])["unit"]
+    torch.testing.assert_close(both[1:], one, rtol=1e-5, atol=1e-6)
+
+
+def test_bad_input_and_unknown_encoder():
+    model = PhysicsPredictor(TINY)
+    with pytest.raises(ValueError, match="frames"):
+        model(torch.rand(2, 32, 32, 3))
+    with pytest.raises(ValueError, match="at most 6"):
+        model(torch.rand(1, 7, 32, 32, 3))
+    with pytest.raises(ValueError, match="encoder"):
+        PhysicsPredictor(PredictorConfig(encoder="nope"))
+    assert "small_cnn" in ENCODERS
+
+
+def test_config_round_trip():
+    assert PredictorConfig.from_dict(TINY.to_dict()) == TINY
