@@ -55,3 +55,24 @@ def test_numba_refuses_gradients():
     model = SpringMassModel(springs, rest, **attributes, dtype=torch.float64)
     with pytest.raises(ValueError, match="without gradients"):
         rollout(model, State(x0, v0.requires_grad_(True)), 1, substeps=2, method="numba")
+
+
+def test_parallel_result_does_not_depend_on_the_thread_count(monkeypatch):
+    import numba
+
+    from reconphys.physics import cpu_kernels
+
+    monkeypatch.setattr(cpu_kernels, "PARALLEL_MIN_SPRINGS", 0)  # force the parallel build
+    springs, rest, x0, v0, attributes = small_system()
+    model = SpringMassModel(springs, rest, **attributes, dtype=torch.float64)
+    results = []
+    threads = numba.get_num_threads()
+    try:
+        for count in (1, threads):
+            numba.set_num_threads(count)
+            results.append(rollout(model, State(x0, v0), 3, substeps=5, method="numba").x)
+    finally:
+        numba.set_num_threads(threads)
+    assert torch.equal(results[0], results[1])
+    reference = rollout(model, State(x0, v0), 3, substeps=5, method="autograd")
+    torch.testing.assert_close(results[0], reference.x, rtol=0, atol=1e-12)

@@ -1,4 +1,4 @@
-"""Command line: ``reconphys demo | make-asset | simulate | inspect``.
+"""Command line: ``reconphys demo | make-asset | simulate | inspect | make-data | data ...``.
 
 User errors (missing or corrupt files, bad shapes, NaN, unstable attributes) print one line,
 ``error: <input>: <what is wrong>``, and exit with status 2; no partial output is left behind.
@@ -323,6 +323,280 @@ def demo(
     summary = _simulate_to(asset, out, frames, True, torch_device, resolution, 0, "auto", False)
     typer.echo(json.dumps(summary))
     typer.echo(f"video: {out / 'simulation.mp4'}   preview: {out / 'preview.png'}")
+
+
+# ----------------------------------------------------------------------------------------------
+# synthetic dataset (docs/dataset.md)
+
+data_app = typer.Typer(
+    no_args_is_help=True, help="Inspect, merge and export synthetic datasets (see make-data)."
+)
+app.add_typer(data_app, name="data")
+
+NAMED_SOURCES = ("procedural", "pybullet", "objaverse")
+
+
+@app.command("make-data")
+@user_errors
+def make_data(
+    out: Path = typer.Option(..., "--out", help="Dataset folder (created; resumed if it exists)."),
+    source: str = typer.Option(
+        "procedural", help="procedural, pybullet, objaverse, or a folder of .obj/.glb/.ply files."
+    ),
+    preset: str = typer.Option("small", help="small (CPU-sized) or paper (450×10 + 46×2, 512²)."),
+    objects: int = typer.Option(None, help="Training objects."),
+    test_objects: int = typer.Option(None, help="Held-out test objects (split by object)."),
+    samples_per_object: int = typer.Option(None, help="Attribute samples per training object."),
+    test_samples_per_object: int = typer.Option(None, help="Attribute samples per test object."),
+    resolution: int = typer.Option(None, help="Image width and height, pixels."),
+    frames: int = typer.Option(None, help="Frames per video (frame 0 = initial state)."),
+    num_gaussians: int = typer.Option(None, help="Gaussians per object."),
+    num_anchors: int = typer.Option(None, help="Anchors N_A per object."),
+    neighbors: int = typer.Option(None, help="K nearest neighbours that make the springs."),
+    min_substeps: int = typer.Option(None, help="Minimum substeps per frame."),
+    distribution: str = typer.Option(None, help="Of m, k, d: uniform (paper) or log-uniform."),
+    seed: int = typer.Option(0, help="Dataset seed: object selection, splits, all samples."),
+    workers: int = typer.Option(
+        0, help="Worker processes (0: one per CPU core, one with --device cuda)."
+    ),
+    device: str = typer.Option("auto", help="auto, cpu or cuda (simulation and rendering)."),
+    shard: str = typer.Option(None, help="I/N: make only shard I of N (then: data merge)."),
+    objaverse_root: Path = typer.Option(None, help="Objaverse mirror (hf-objaverse-v1 folder)."),
+    objaverse_uids: Path = typer.Option(None, help="File of Objaverse UIDs to draw from."),
+    download: bool = typer.Option(False, help="Objaverse only: fetch missing objects (network)."),
+):
+    """Generate a synthetic drop-video dataset: objects × attribute samples, 30 frames, 4 views.
+
+    Writes OUT/objects/ (canonical Gaussians + anchors, once per object), OUT/samples/ (frames,
+    trajectory, cameras, attributes, mp4 per view) and OUT/manifest.json. Rerunning the same
+    command resumes a killed run; a run with other settings into the same OUT is refused."""
+    from .data.make import make_dataset
+    from .data.plan import parse_shard
+    from .data.settings import make_settings
+
+    if source not in NAMED_SOURCES:
+        source = str(Path(source).resolve())
+    settings = make_settings(
+        preset,
+        source=source,
+        seed=seed,
+        objects=objects,
+        test_objects=test_objects,
+        samples_per_object=samples_per_object,
+        test_samples_per_object=test_samples_per_object,
+        resolution=resolution,
+        num_frames=frames,
+        num_gaussians=num_gaussians,
+        num_anchors=num_anchors,
+        num_neighbors=neighbors,
+        min_substeps=min_substeps,
+        distribution=distribution,
+        objaverse_uids=str(objaverse_uids.resolve()) if objaverse_uids else None,
+    )
+    report = make_dataset(
+        settings,
+        out,
+        workers=workers,
+        device=device,
+        shard=parse_shard(shard),
+        objaverse_root=objaverse_root,
+        download=download,
+        progress=True,
+    )
+    manifest = report.manifest
+    name = "manifest.json" if shard is None else f"its shard manifest ({shard})"
+    typer.echo(
+        f"wrote {report.generated} samples ({report.skipped} were already there) in "
+        f"{report.seconds:.1f} s: {out}, {len(manifest['samples'])} samples listed in {name}"
+    )
+
+
+@data_app.command("show")
+@user_errors
+def data_show(
+    root: Path = typer.Argument(..., help="Dataset folder."),
+    sheet: Path = typer.Option(None, help="Contact-sheet PNG (default: ROOT/contact_sheet.png)."),
+    samples: int = typer.Option(4, help="Samples (rows) in the contact sheet."),
+    view: int = typer.Option(0, help="View 0–3 shown in the contact sheet."),
+):
+    """Print a summary table (splits, attribute ranges, contact-frame histogram) and write a
+    contact sheet (rows: samples; columns: evenly spaced frames of one view)."""
+    import imageio.v2 as imageio
+
+    from .data.show import contact_sheet, summary
+
+    if not 0 <= view < 4:
+        raise InputError(f"expected 0, 1, 2 or 3, got {view}", field="--view")
+    typer.echo(summary(root))
+    sheet = sheet or root / "contact_sheet.png"
+    try:
+        imageio.imwrite(sheet, contact_sheet(root, samples, view), format="PNG")
+    except OSError as e:
+        raise InputError(f"cannot write ({e.strerror or e})", source=str(sheet)) from None
+    typer.echo(f"contact sheet: {sheet}")
+
+
+@data_app.command("merge")
+@user_errors
+def data_merge(
+    out: Path = typer.Argument(..., help="Dataset folder that receives manifest.json."),
+    shards: list[Path] = typer.Argument(None, help="Other folders holding shards (copied in)."),
+):
+    """Check the shard manifests (make-data --shard I/N) and join them into OUT/manifest.json."""
+    from .data.make import merge_shards
+
+    merged = merge_shards(out, shards or [])
+    typer.echo(f"merged {len(merged['samples'])} samples into {out / 'manifest.json'}")
+
+
+@data_app.command("export")
+@user_errors
+def data_export(
+    root: Path = typer.Argument(..., help="Dataset folder."),
+    sample: str = typer.Argument(..., help="Sample id (see manifest.json)."),
+    out: Path = typer.Argument(..., help="Asset folder to write."),
+    overwrite: bool = typer.Option(False, help="Replace an existing asset folder."),
+):
+    """Write one sample as an asset folder (placed object, attributes, initial velocity): what
+    `reconphys simulate --frames FRAMES-1` turns into the sample's stored trajectory."""
+    from .assets.asset import write_asset
+    from .data.dataset import DropDataset
+
+    dataset = DropDataset(root, allow_incomplete=True, verify=False)
+    ids = [s["id"] for s in dataset.samples]
+    if sample not in ids:
+        raise InputError("no such sample in manifest.json", source=str(root), field=sample)
+    write_asset(dataset.asset(ids.index(sample)), out, overwrite=overwrite)
+    typer.echo(f"wrote {out}")
+
+
+# ----------------------------------------------------------------------------------------------
+# interactive viewer (docs/viewer.md)
+
+
+@app.command()
+@user_errors
+def view(
+    asset_dir: Path = typer.Argument(..., help="Asset folder to manipulate."),
+    port: int = typer.Option(8080, help="Port of the web viewer."),
+    host: str = typer.Option("127.0.0.1", help="Interface to listen on (0.0.0.0: all)."),
+    device: str = typer.Option("auto", help="Simulation device: auto, cpu or cuda."),
+    substeps: int = typer.Option(None, help="Substeps per frame (never below stability)."),
+    paused: bool = typer.Option(False, "--paused", help="Start paused."),
+    record_dir: Path = typer.Option(Path("recordings"), help="Where recordings are saved."),
+    script: Path = typer.Option(None, help="Run this JSON action script headless instead."),
+    out: Path = typer.Option(None, help="Output folder of --script (trajectory, mp4)."),
+    resolution: int = typer.Option(256, help="Video size of --script, pixels."),
+    benchmark: int = typer.Option(0, help="Time this many frames headless, print, exit."),
+):
+    """Open ASSET in a browser viewer: live simulation; drop, grab, squeeze and stretch it
+    (needs the `viewer` extra). With --script: the same controls, headless, from a file."""
+    from .assets.asset import read_asset
+    from .simulate import resolve_device
+    from .viewer.command import view_command
+
+    if not 0 <= port < 65536:
+        raise InputError(f"must be a port number 0–65535, got {port}", field="--port")
+    if resolution < 8:
+        raise InputError(f"must be ≥ 8 pixels, got {resolution}", field="--resolution")
+    if substeps is not None and substeps < 1:
+        raise InputError(f"must be ≥ 1, got {substeps}", field="--substeps")
+    torch_device = resolve_device(device)
+    asset = read_asset(asset_dir)
+    view_command(
+        asset, torch_device, host, port, substeps, paused, record_dir, script, out, resolution,
+        benchmark, echo=typer.echo,
+    )  # fmt: skip
+
+
+# ----------------------------------------------------------------------------------------------
+# evaluation (docs/evaluation.md)
+
+
+@app.command("evaluate")
+@user_errors
+def evaluate(
+    data: Path = typer.Option(..., "--data", help="Dataset folder written by make-data."),
+    out: Path = typer.Option(..., "--out", help="Report folder to write."),
+    split: str = typer.Option("test", help="test, train or all."),
+    methods: str = typer.Option(
+        "trivial,oracle,springgaus,appearance", help="Comma-separated methods to compare."
+    ),
+    limit: int = typer.Option(None, help="Evaluate only the first N samples of the split."),
+    budget_seconds: float = typer.Option(
+        60.0, help="Seconds per scene for the per-scene fits (springgaus, appearance)."
+    ),
+    device: str = typer.Option("cpu", help="auto, cpu or cuda (fits, simulation, rendering)."),
+    seed: int = typer.Option(0, help="Seed of the per-scene fits."),
+    chamfer_points: int = typer.Option(8192, help="Points per set for the Chamfer distance."),
+    emd_points: int = typer.Option(2048, help="Points per set for the EMD (exact matching)."),
+    sheet_samples: int = typer.Option(2, help="Samples shown in the contact sheet."),
+    threads: int = typer.Option(0, help="torch CPU threads (0: torch's default)."),
+    overwrite: bool = typer.Option(False, help="Replace an existing report folder."),
+):
+    """Compare methods on a split of a dataset: the paper's Tables 1–3 with the trivial control.
+
+    Writes OUT/metrics.json, OUT/report.md, OUT/summary.csv, OUT/per_sample.csv,
+    OUT/per_frame.csv and figures (PSNR per frame, attribute scatter, contact sheet)."""
+    from .eval.evaluate import EvalSettings, run_evaluation
+    from .eval.methods import parse_methods
+    from .eval.report import check_output, write_report
+    from .eval.samples import EvalSet
+    from .simulate import resolve_device
+
+    names = parse_methods(methods)
+    _check_positive(budget_seconds, "--budget-seconds")
+    for value, flag in ((chamfer_points, "--chamfer-points"), (emd_points, "--emd-points")):
+        if value < 1:
+            raise InputError(f"must be ≥ 1, got {value}", field=flag)
+    if sheet_samples < 0 or threads < 0:
+        flag = "--sheet-samples" if sheet_samples < 0 else "--threads"
+        raise InputError("must be ≥ 0", field=flag)
+    torch_device = resolve_device(device)
+    check_output(out, overwrite)
+    eval_set = EvalSet(data, split, limit)
+    if threads:
+        torch.set_num_threads(threads)
+    settings = EvalSettings(
+        methods=tuple(names),
+        budget_seconds=budget_seconds,
+        device=str(torch_device),
+        seed=seed,
+        chamfer_points=chamfer_points,
+        emd_points=emd_points,
+        sheet_samples=sheet_samples,
+    )
+    optional = {
+        "--limit": (limit, None),
+        "--device": (device, "cpu"),
+        "--seed": (seed, 0),
+        "--chamfer-points": (chamfer_points, 8192),
+        "--emd-points": (emd_points, 2048),
+        "--threads": (threads, 0),
+    }
+    command = (
+        f"reconphys evaluate --data {data} --split {split} --methods {','.join(names)} "
+        f"--budget-seconds {budget_seconds:g}"
+        + "".join(
+            f" {flag} {value}" for flag, (value, default) in optional.items() if value != default
+        )
+        + f" --out {out}"
+    )
+    typer.echo(f"evaluating {len(eval_set)} {split} samples with {', '.join(names)}")
+    results = run_evaluation(eval_set, settings, log=typer.echo)
+    document = write_report(
+        results, out, str(data), split, limit, eval_set.settings, command, overwrite
+    )
+    for name, entry in document["methods"].items():
+        recon, future = entry["reconstruction"]["psnr"], entry["future"]["psnr"]
+        typer.echo(
+            f"{name:<20} PSNR reconstruction "
+            + ("–" if recon is None else f"{recon:.2f}")
+            + " dB, future "
+            + ("–" if future is None else f"{future:.2f}")
+            + " dB"
+        )
+    typer.echo(f"report: {out / 'report.md'} ({results.seconds:.0f} s)")
 
 
 def main() -> None:

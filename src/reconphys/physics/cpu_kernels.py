@@ -129,6 +129,9 @@ if numba is not None:
 # Springs × scenes per substep below which the serial version is faster (thread wake-up costs
 # more than it saves); measured on the 2-core CI machine, see docs/benchmarks.md.
 PARALLEL_MIN_SPRINGS = 16_384
+# Spring chunks per scene in the parallel version. Fixed (not the thread count) so that the force
+# summation order, and hence the result to the last bit, does not depend on the machine.
+PARALLEL_CHUNKS = 4
 
 
 def _array(t: Tensor, shape: tuple[int, ...], dtype) -> np.ndarray:
@@ -162,8 +165,8 @@ class CompiledRollout:
             dtype=dtype,
         )
         self.substeps, self.frame_dt = substeps, frame_dt
-        parallel = batch * num_springs >= PARALLEL_MIN_SPRINGS and numba.get_num_threads() > 1
-        chunks = numba.get_num_threads() if parallel else 1
+        parallel = batch * num_springs >= PARALLEL_MIN_SPRINGS
+        chunks = PARALLEL_CHUNKS if parallel else 1
         self.kernel = _frame_parallel if parallel else _frame_serial
         self.buffers = np.zeros((batch, chunks, num_anchors, 3), dtype=dtype)
         self.no_force = np.zeros_like(self.x)

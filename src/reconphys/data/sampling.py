@@ -1,0 +1,155 @@
+"""Per-sample randomness: physical attributes, orientation, initial velocity and drop height.
+
+Distributions (documented in docs/dataset.md; ranges from DESIGN §5):
+
+- mass m (kg per anchor), stiffness k (N per unit strain), damping d (N·s per unit strain rate):
+  uniform on their ranges (the paper's protocol) or log-uniform (``distribution="log-uniform"``),
+  drawn independently; friction f: uniform on [0, 1].
+- orientation: uniform on SO(3) (a normalised 4D Gaussian as quaternion).
+- angular velocity: uniform direction, speed uniform on [0, max_angular_speed] rad/s, about the
+  anchors' centroid; horizontal velocity: each axis uniform on ±max_horizontal_speed m/s.
+- first ground contact: a target time ``t_c`` uniform on ``contact_frame_range`` frames; the
+  vertical velocity v_z is uniform on the part of [−max_vertical_speed, max_vertical_speed] that
+  keeps the free-fall drop height ``½ g t_c² − v_z t_c`` inside ``drop_height_range``; the height
+  is then solved for the rotating object so that its lowest anchor first reaches the ground at
+  ``t_c`` (see :func:`centroid_height_for_contact`).
+
+Each sample draws from its own generator seeded by (dataset seed, object id, sample index), in a
+fixed order, so a sample never depends on which other samples are generated.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..physics import seed_from_id
+from .settings import DataSettings
+
+CONTACT_TOLERANCE = 1e-3  # metres: an anchor this close to the ground counts as touching it
+TIME_GRID = 128  # samples of [0, t_c] on which the rotating object's lowest point is tracked
+
+
+@dataclass(frozen=True)
+class SampleSpec:
+    """Everything random about one sample (SI units; world = rotation · object + translation)."""
+
+    mass: float
+    stiffness: float
+    damping: float
+    friction: float
+    rotation: np.ndarray  # [3, 3] float64, world ← object frame
+    linear_velocity: tuple[float, float, float]  # m/s
+    angular_velocity: tuple[float, float, float]  # rad/s about the anchors' centroid
+    target_contact_time: float  # seconds
+
+    @property
+    def attributes(self) -> dict[str, float]:
+        return {
+            "mass": self.mass,
+            "stiffness": self.stiffness,
+            "damping": self.damping,
+            "friction": self.friction,
+        }
+
+
+def sample_seed(dataset_seed: int, object_id: str, sample_index: int) -> int:
+    return seed_from_id(f"sample:{dataset_seed}:{object_id}:{sample_index}")
+
+
+def _draw(rng: np.random.Generator, bounds: tuple[float, float], log: bool) -> float:
+    low, high = bounds
+    if log and low > 0:
+        return float(math.exp(rng.uniform(math.log(low), math.log(high))))
+    return float(rng.uniform(low, high))
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:  # [3, 3]
+    """Uniform random rotation (Shoemake: a normalised 4D Gaussian is a uniform unit quaternion)."""
+    q = rng.standard_normal(4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def draw_sample(settings: DataSettings, object_id: str, sample_index: int) -> SampleSpec:
+    """The random part of sample ``sample_index`` of ``object_id`` (see the module docstring)."""
+    rng = np.random.default_rng(sample_seed(settings.seed, object_id, sample_index))
+    log = settings.distribution == "log-uniform"
+    mass = _draw(rng, settings.mass_range, log)
+    stiffness = _draw(rng, settings.stiffness_range, log)
+    damping = _draw(rng, settings.damping_range, log)
+    friction = _draw(rng, settings.friction_range, False)
+    rotation = random_rotation(rng)
+    axis = rng.standard_normal(3)
+    axis /= np.linalg.norm(axis)
+    angular = axis * rng.uniform(0.0, settings.max_angular_speed)
+    horizontal = rng.uniform(-settings.max_horizontal_speed, settings.max_horizontal_speed, 2)
+    t_c = float(rng.uniform(*settings.contact_frame_range)) * settings.frame_dt
+    fall = 0.5 * 9.8 * t_c * t_c  # free-fall distance in t_c from rest
+    low, high = settings.drop_height_range
+    v_max = settings.max_vertical_speed
+    v_low, v_high = max(-v_max, (fall - high) / t_c), min(v_max, (fall - low) / t_c)
+    if v_low > v_high:  # the ranges cannot both hold: keep the height range
+        v_low = v_high = (fall - min(max(fall, low), high)) / t_c
+    v_z = float(rng.uniform(v_low, v_high))
+    return SampleSpec(
+        mass=mass,
+        stiffness=stiffness,
+        damping=damping,
+        friction=friction,
+        rotation=rotation,
+        linear_velocity=(float(horizontal[0]), float(horizontal[1]), v_z),
+        angular_velocity=tuple(float(a) for a in angular),
+        target_contact_time=t_c,
+    )
+
+
+def axis_angle_matrices(rotation_vectors: np.ndarray) -> np.ndarray:  # [T, 3] → [T, 3, 3]
+    """Rodrigues' formula for rotation vectors (axis × angle in radians)."""
+    angle = np.linalg.norm(rotation_vectors, axis=-1, keepdims=True)
+    axis = rotation_vectors / np.maximum(angle, 1e-12)
+    x, y, z = axis[:, 0], axis[:, 1], axis[:, 2]
+    zero = np.zeros_like(x)
+    cross = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], -1).reshape(-1, 3, 3)
+    s, c = np.sin(angle)[..., None], np.cos(angle)[..., None]
+    return np.eye(3) + s * cross + (1 - c) * (cross @ cross)
+
+
+def centroid_height_for_contact(
+    relative_anchors: np.ndarray,  # [N_A, 3] anchors minus their centroid, world axes, metres
+    vertical_velocity: float,  # m/s
+    angular_velocity: tuple[float, float, float],  # rad/s
+    contact_time: float,  # s
+    gravity: float = 9.8,  # m/s²
+) -> float:  # metres
+    """Centroid height at t = 0 for which the rigidly moving object first touches z = 0 at
+    ``contact_time``: the largest ½ g t² − v_z t − lowest(t) over t ∈ [0, t_c].
+
+    Before contact the springs are at rest and the motion is rigid (free fall plus rotation about
+    the centroid), so ``lowest(t)``, the lowest anchor relative to the centroid, follows from the
+    angular velocity. If rotation would bring a point down earlier, contact happens earlier than
+    ``contact_time`` (never later).
+    """
+    times = np.linspace(0.0, contact_time, TIME_GRID)
+    rotations = axis_angle_matrices(times[:, None] * np.asarray(angular_velocity)[None])
+    lowest = (relative_anchors @ rotations[:, 2, :].T).min(0)  # [T] z of R(ωt)·r, minimum
+    needed = 0.5 * gravity * times**2 - vertical_velocity * times - lowest
+    return float(needed.max())
+
+
+def contact_frame(
+    anchors: np.ndarray,  # [T, N_A, 3] metres
+    ground_height: float = 0.0,
+    tolerance: float = CONTACT_TOLERANCE,
+) -> int:
+    """First frame whose lowest anchor is within ``tolerance`` of the ground; −1 if none."""
+    touching = np.asarray(anchors)[..., 2].min(-1) <= ground_height + tolerance
+    return int(np.argmax(touching)) if touching.any() else -1

@@ -1,0 +1,152 @@
+"""Generation settings of a synthetic dataset (DESIGN §5, §7) and the presets.
+
+Every number that changes what ``make-data`` writes lives in :class:`DataSettings`; the manifest
+stores them, a resumed run must use the same ones, and :meth:`DataSettings.fingerprint` tags every
+sample with them. How a run is executed (workers, shard, device) is not part of the settings.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, fields, replace
+
+from ..errors import InputError
+from ..physics import ATTRIBUTE_RANGES
+
+DISTRIBUTIONS = ("uniform", "log-uniform")
+
+
+@dataclass(frozen=True)
+class DataSettings:
+    """What to generate. Units: metres, seconds, m/s, rad/s; frame counts are video frames."""
+
+    source: str = "procedural"  # "procedural", "pybullet", "objaverse" or a folder of meshes
+    seed: int = 0
+    objects: int = 8  # training objects
+    test_objects: int = 0  # held-out objects (split by object, never by sample)
+    samples_per_object: int = 2  # attribute samples per training object
+    test_samples_per_object: int = 2  # attribute samples per test object
+    resolution: int = 128  # image width = height, pixels
+    num_frames: int = 30  # video frames, frame 0 = the initial state
+    frame_dt: float = 0.03  # seconds between frames
+    size: float = 0.5  # largest bounding-box side of every object, metres
+    num_gaussians: int = 2000  # Gaussians per object (at most, for Gaussian PLY inputs)
+    num_anchors: int = 256  # N_A
+    num_neighbors: int = 32  # K of the kNN springs
+    binding_neighbors: int = 16  # n_b
+    binding_power: float = 2.0  # p_b
+    spring_exponent: float = 0.5  # p_k
+    restitution: float = 0.0  # e
+    min_substeps: int = 100  # floor of the substeps per frame (more when stability needs them)
+    distribution: str = "uniform"  # of m, k and d: "uniform" (the paper) or "log-uniform"
+    mass_range: tuple[float, float] = ATTRIBUTE_RANGES["mass"]  # kg per anchor
+    stiffness_range: tuple[float, float] = ATTRIBUTE_RANGES["stiffness"]  # N per unit strain
+    damping_range: tuple[float, float] = ATTRIBUTE_RANGES["damping"]  # N·s per unit strain rate
+    friction_range: tuple[float, float] = ATTRIBUTE_RANGES["friction"]  # Coulomb coefficient
+    contact_frame_range: tuple[float, float] = (5.0, 14.0)  # target first contact, frames
+    drop_height_range: tuple[float, float] = (0.05, 0.5)  # lowest anchor at frame 0, metres
+    max_vertical_speed: float = 1.2  # |v_z| at frame 0, m/s
+    max_horizontal_speed: float = 0.3  # per horizontal axis, m/s
+    max_angular_speed: float = 2.0  # rad/s, random axis
+    camera_radius: float = 2.0  # metres from the target
+    camera_fov_deg: float = 40.0  # vertical
+    camera_elevation_deg: float = 15.0
+    camera_target: tuple[float, float, float] = (0.0, 0.0, 0.3)  # metres
+    objaverse_uids: str = ""  # optional file of Objaverse UIDs (one a line) to draw from
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
+
+    @staticmethod
+    def from_dict(data: dict, where: str = "settings") -> DataSettings:
+        names = {f.name for f in fields(DataSettings)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise InputError(f"unknown settings {unknown}", source=where)
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        return DataSettings(**values).validated()
+
+    def fingerprint(self) -> str:
+        """Short hash of the settings: tags every object and sample written with them."""
+        text = json.dumps(self.to_dict(), sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def samples_for(self, split: str) -> int:
+        return self.samples_per_object if split == "train" else self.test_samples_per_object
+
+    def validated(self) -> DataSettings:
+        """Check every value; raises InputError naming the flag."""
+        counts = {
+            "--objects": (self.objects, 0),
+            "--test-objects": (self.test_objects, 0),
+            "--samples-per-object": (self.samples_per_object, 1),
+            "--test-samples-per-object": (self.test_samples_per_object, 1),
+            "--resolution": (self.resolution, 8),
+            "--frames": (self.num_frames, 2),
+            "--num-gaussians": (self.num_gaussians, 16),
+            "--num-anchors": (self.num_anchors, 8),
+            "--neighbors": (self.num_neighbors, 1),
+            "--min-substeps": (self.min_substeps, 1),
+            "--seed": (self.seed, 0),
+        }
+        for flag, (value, low) in counts.items():
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise InputError(f"must be an integer ≥ {low}, got {value!r}", field=flag)
+        if self.objects + self.test_objects < 1:
+            raise InputError("ask for at least one object", field="--objects")
+        if self.distribution not in DISTRIBUTIONS:
+            raise InputError(
+                f"expected one of {', '.join(DISTRIBUTIONS)}, got {self.distribution!r}",
+                field="--distribution",
+            )
+        for name in ("frame_dt", "size", "camera_radius", "camera_fov_deg"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError(f"must be a positive number, got {value!r}", field=name)
+        for name, allowed in ATTRIBUTE_RANGES.items():
+            low, high = getattr(self, f"{name}_range")
+            if not (allowed[0] <= low <= high <= allowed[1]):
+                raise InputError(
+                    f"[{low}, {high}] must lie inside DESIGN §5's [{allowed[0]}, {allowed[1]}]",
+                    field=f"{name}_range",
+                )
+        first, last = self.contact_frame_range
+        if not (0 < first <= last < self.num_frames - 1):
+            raise InputError(
+                f"[{first}, {last}] must lie inside (0, {self.num_frames - 1})",
+                field="contact_frame_range",
+            )
+        low, high = self.drop_height_range
+        if not (0 < low <= high):
+            raise InputError(f"[{low}, {high}] must satisfy 0 < low ≤ high", "drop_height_range")
+        return self
+
+
+# Sizes per preset; any flag given on the command line overrides its preset value.
+PRESETS: dict[str, dict] = {
+    # CPU-sized: the acceptance run (3 objects × 2 samples at 32 px) takes well under a minute.
+    "small": {},
+    # The paper's protocol (ReconPhys §4.1): 450 × 10 training, 46 × 2 test samples at 512²,
+    # with the model defaults of DESIGN §4 (N_A 2048, K 32) and 20 000 Gaussians per object.
+    "paper": {
+        "objects": 450,
+        "test_objects": 46,
+        "samples_per_object": 10,
+        "test_samples_per_object": 2,
+        "resolution": 512,
+        "num_gaussians": 20000,
+        "num_anchors": 2048,
+    },
+}
+
+
+def make_settings(preset: str = "small", **overrides) -> DataSettings:
+    """Settings of ``preset`` with ``overrides`` (``None`` values are ignored), validated."""
+    if preset not in PRESETS:
+        raise InputError(f"expected one of {', '.join(PRESETS)}, got {preset!r}", field="--preset")
+    values = dict(PRESETS[preset])
+    values.update({k: v for k, v in overrides.items() if v is not None})
+    return replace(DataSettings(), **values).validated()
