@@ -1,0 +1,1 @@
+"""Training: objectives and the training loop (DESIGN §8)."""
