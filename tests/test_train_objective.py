@@ -9,9 +9,20 @@ from reconphys.data.dataset import GeneratedDropDataset
 from reconphys.data.settings import make_settings
 from reconphys.models.physics_predictor import ATTRIBUTE_ORDER, PhysicsPredictor, PredictorConfig
 from reconphys.render import Cameras
+from reconphys.threads import set_cpu_threads
 from reconphys.train.objective import SceneBatch, photometric_loss, supervised_loss
 
 FRAMES = 4
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """torch and Numba on one thread: on a 2-core machine shared with other jobs, more threads
+    than free cores slow the simulation many times over."""
+    threads = torch.get_num_threads()
+    set_cpu_threads(1)
+    yield
+    set_cpu_threads(threads)
 
 
 @pytest.fixture(scope="module")
@@ -93,3 +104,27 @@ def test_window_must_be_positive(tiny_batch):
     attributes = {n: true[:, i] for i, n in enumerate(ATTRIBUTE_ORDER)}
     with pytest.raises(ValueError, match="window"):
         photometric_loss(attributes, scenes, frames, cameras, window=0)
+
+
+def test_padded_springs_change_nothing(tiny_batch):
+    """Scenes with different spring counts share a batch: the pads (k = d = 0) must leave the
+    stability bound and the forces finite and every scene's loss as it is alone."""
+    from dataclasses import replace
+
+    scenes, frames, cameras, true = _inputs(tiny_batch)
+    first, second = scenes.assets
+    fewer = replace(second, springs=second.springs[:-7], rest_length=second.rest_length[:-7])
+    attributes = {n: true[:, i].clone().requires_grad_(True) for i, n in enumerate(ATTRIBUTE_ORDER)}
+
+    def loss_of(assets, index):
+        picked = {n: v[index] for n, v in attributes.items()}
+        cams = Cameras(cameras.K[index], cameras.world_to_cam[index], 16, 16)
+        return photometric_loss(
+            picked, SceneBatch.from_assets(assets), frames[index], cams, min_substeps=200
+        )  # 200 substeps: more than either scene's bound, so both runs use the same
+
+    both = loss_of([first, fewer], [0, 1])
+    both.backward()
+    assert torch.isfinite(both) and all(torch.isfinite(v.grad).all() for v in attributes.values())
+    alone = (loss_of([first], [0]) + loss_of([fewer], [1])) / 2
+    assert both.item() == pytest.approx(alone.item(), rel=1e-5, abs=1e-12)

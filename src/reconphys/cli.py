@@ -1,4 +1,4 @@
-"""Command line: ``reconphys demo | make-asset | simulate | inspect | make-data | data ...``.
+"""Command line: ``reconphys demo | make-asset | simulate | inspect | make-data | data | train``.
 
 User errors (missing or corrupt files, bad shapes, NaN, unstable attributes) print one line,
 ``error: <input>: <what is wrong>``, and exit with status 2; no partial output is left behind.
@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import os
 import shutil
 import sys
 import time
@@ -532,6 +533,11 @@ def evaluate(
     emd_points: int = typer.Option(2048, help="Points per set for the EMD (exact matching)."),
     sheet_samples: int = typer.Option(2, help="Samples shown in the contact sheet."),
     threads: int = typer.Option(0, help="torch CPU threads (0: torch's default)."),
+    model: Path = typer.Option(
+        None,
+        help="Trained predictor of the reconphys method: a .safetensors file or a `reconphys "
+        "train` output folder (default: $RECONPHYS_MODEL, else the shipped model).",
+    ),
     overwrite: bool = typer.Option(False, help="Replace an existing report folder."),
 ):
     """Compare methods on a split of a dataset: the paper's Tables 1–3 with the trivial control.
@@ -552,11 +558,15 @@ def evaluate(
     if sheet_samples < 0 or threads < 0:
         flag = "--sheet-samples" if sheet_samples < 0 else "--threads"
         raise InputError("must be ≥ 0", field=flag)
+    if model is not None and "reconphys" not in names:
+        raise InputError("only the reconphys method uses a model; add it to --methods", "--model")
     torch_device = resolve_device(device)
     check_output(out, overwrite)
     eval_set = EvalSet(data, split, limit)
     if threads:
-        torch.set_num_threads(threads)
+        from .threads import set_cpu_threads
+
+        set_cpu_threads(threads)
     settings = EvalSettings(
         methods=tuple(names),
         budget_seconds=budget_seconds,
@@ -565,6 +575,7 @@ def evaluate(
         chamfer_points=chamfer_points,
         emd_points=emd_points,
         sheet_samples=sheet_samples,
+        model=None if model is None else str(model),
     )
     optional = {
         "--limit": (limit, None),
@@ -573,6 +584,7 @@ def evaluate(
         "--chamfer-points": (chamfer_points, 8192),
         "--emd-points": (emd_points, 2048),
         "--threads": (threads, 0),
+        "--model": (model, None),
     }
     command = (
         f"reconphys evaluate --data {data} --split {split} --methods {','.join(names)} "
@@ -597,6 +609,43 @@ def evaluate(
             + " dB"
         )
     typer.echo(f"report: {out / 'report.md'} ({results.seconds:.0f} s)")
+
+
+# ----------------------------------------------------------------------------------------------
+# training (docs/training.md)
+
+
+@app.command("train")
+@user_errors
+def train(
+    config: Path = typer.Argument(..., help="Config file (.toml or .json): see configs/."),
+    overrides: list[str] = typer.Argument(
+        None, help="KEY=VALUE overrides with dotted keys, e.g. optim.lr=3e-4 train.steps=200."
+    ),
+    overwrite: bool = typer.Option(
+        False, help="Start again: remove OUT's checkpoint, logs and model instead of resuming."
+    ),
+    progress: bool = typer.Option(True, help="Show a progress bar (else a line per log_every)."),
+):
+    """Train the physics predictor: self-supervised (photometric loss through simulator and
+    renderer), supervised or mixed. Resumes from OUT/checkpoint.pt when there is one; runs
+    under torchrun for DDP. Writes OUT/log.jsonl, OUT/checkpoint.pt, OUT/model.safetensors and
+    OUT/model.json (OUT = train.out)."""
+    from .train.config import load_config
+    from .train.trainer import train as run_training
+
+    settings = load_config(config, overrides or [])
+    result = run_training(settings, overwrite=overwrite, progress=progress, log=typer.echo)
+    if int(os.environ.get("RANK", "0")) != 0:
+        return  # under torchrun: rank 0 reports
+    if result.records or result.first_step == 1:
+        last = result.records[-1] if result.records else {}
+        typer.echo(
+            f"trained {result.step} steps ({result.seconds:.0f} s in total), final loss "
+            f"{last.get('loss', float('nan')):.5g}: {result.out / 'model.safetensors'}"
+        )
+    else:
+        typer.echo(f"{result.out} already has {result.step} steps (train.steps); nothing to do")
 
 
 def main() -> None:

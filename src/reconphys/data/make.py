@@ -20,6 +20,7 @@ from pathlib import Path
 import torch
 
 from ..errors import InputError
+from ..threads import set_cpu_threads
 from .generate import generate_sample
 from .objects import CanonicalObject, build_object
 from .plan import PlannedObject, PlannedSample, in_shard, plan_objects, plan_samples
@@ -81,7 +82,7 @@ _worker: dict = {}  # per-process context: set once by _init_worker, read by the
 def _init_worker(settings, source, root, device, threads: int | None) -> None:
     """Set up a worker process (``threads=None``: the calling process itself, left as it is)."""
     if threads is not None:
-        torch.set_num_threads(threads)
+        set_cpu_threads(threads)
         # Settling objects drive velocities into float32 denormals, very slow on CPUs.
         torch.set_flush_denormal(True)
     _worker.update(settings=settings, source=source, root=root, device=device, cache=None)

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from ..physics.model import ATTRIBUTE_RANGES
@@ -178,6 +179,20 @@ def normalize_attributes(attributes: dict[str, Tensor] | Tensor) -> Tensor:
         value = torch.log(value) if name in LOG_SCALED else value
         columns.append(((value - low) / (high - low)).clamp(0.0, 1.0))
     return torch.stack(columns, -1)
+
+
+def resize_frames(frames: Tensor, resolution: int) -> Tensor:
+    """Frames at the predictor's input size: [B, T, H, W, 3] → [B, T, R, R, 3], R = resolution
+    (area average down, bilinear up; the dataset resizes the same way)."""
+    b, t, h, w, _ = frames.shape
+    if h == resolution and w == resolution:
+        return frames
+    flat = frames.reshape(b * t, h, w, 3).permute(0, 3, 1, 2)
+    if resolution < h:
+        flat = F.interpolate(flat, size=(resolution, resolution), mode="area")
+    else:
+        flat = F.interpolate(flat, size=(resolution, resolution), mode="bilinear")
+    return flat.permute(0, 2, 3, 1).reshape(b, t, resolution, resolution, 3).clamp(0, 1)
 
 
 # --- the predictor --------------------------------------------------------------------------

@@ -50,6 +50,11 @@ class SceneBatch:
             springs[b, :e] = asset.springs
             rest[b, :e] = asset.rest_length
             active[b, :e] = 1.0
+            # Pads repeat the scene's first spring with k = d = 0: a spring between two distinct
+            # anchors has a direction, so the stability bound and the forces stay finite (a
+            # zero-length pad (0, 0) made them 0/0).
+            springs[b, e:] = asset.springs[0]
+            rest[b, e:] = asset.rest_length[0]
         x0 = torch.stack([a.x0 for a in assets]).float()
         v0 = torch.stack([a.v0 for a in assets]).float()
         return SceneBatch(

@@ -1,0 +1,217 @@
+"""Training samples and their order: one view's frames + the sample's asset, in a fixed order.
+
+:class:`TrainingSamples` wraps the two datasets of :mod:`reconphys.data.dataset` (a folder written
+by ``make-data``, or generation on the fly) and adds to every item the sample's simulation-ready
+asset — the frozen geometry of the self-supervised objective. For now this is the dataset's
+canonical Gaussians, anchors, springs and binding placed as in the sample, i.e. **ground-truth
+geometry** (DESIGN §8 (a): an upper bound, labelled as such in the model's metadata).
+
+The order is a pure function of ``(seed, epoch)`` (:func:`epoch_permutation`), and the samples of
+optimiser step ``s`` are a pure function of ``(seed, s, rank, world size)``
+(:func:`step_indices`): a resumed run reads exactly the batches the uninterrupted run would have,
+and DDP ranks read disjoint parts of every global batch (DistributedSampler-style striding).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import statistics
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+from torch.utils.data import Dataset, Sampler
+
+from ..assets.asset import Asset
+from ..data.dataset import ATTRIBUTE_ORDER, DropDataset, GeneratedDropDataset
+from ..data.objects import place, sample_asset
+from ..data.sampling import draw_sample
+from ..data.settings import DataSettings, make_settings
+from ..data.storage import read_manifest
+from ..errors import InputError
+from .config import GENERATE, DataConfig
+
+GEOMETRY = "ground truth (the dataset's canonical Gaussians, anchors and springs)"
+
+
+@dataclass
+class Batch:
+    """B samples of one view (H = W = the loss' render resolution)."""
+
+    frames: Tensor  # [B, T, H, W, 3] float32 in [0, 1], frames 0..T−1 of the input view
+    K: Tensor  # [B, 3, 3] intrinsics in pixels at resolution H
+    world_to_cam: Tensor  # [B, 4, 4] OpenCV convention, metres
+    attributes: Tensor  # [B, 4] true mass, stiffness, damping, friction (ATTRIBUTE_ORDER)
+    assets: list[Asset]  # the samples' placed objects (geometry + initial state)
+    ids: list[str]
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def to(self, device) -> Batch:
+        return Batch(
+            self.frames.to(device),
+            self.K.to(device),
+            self.world_to_cam.to(device),
+            self.attributes.to(device),
+            self.assets,
+            self.ids,
+        )
+
+
+def collate(items: list[dict]) -> Batch:
+    return Batch(
+        frames=torch.stack([item["frames"][0] for item in items]),
+        K=torch.stack([item["K"][0] for item in items]),
+        world_to_cam=torch.stack([item["world_to_cam"][0] for item in items]),
+        attributes=torch.stack([item["attributes"] for item in items]),
+        assets=[item["asset"] for item in items],
+        ids=[item["id"] for item in items],
+    )
+
+
+def generate_settings(config: DataConfig) -> DataSettings:
+    """The DataSettings of ``data.source = "generate"``: the preset with data.generate on top."""
+    try:
+        return make_settings(config.preset, **config.generate)
+    except InputError as e:  # names make-data's flag, e.g. "--num-anchors: must be ..."
+        raise InputError(str(e), field="data.generate") from None
+
+
+class TrainingSamples(Dataset):
+    """Items ``{frames [1, T, H, W, 3], K [1, 3, 3], world_to_cam [1, 4, 4], attributes [4],
+    id, asset}`` of one view, frames 0..T−1, at the loss' render resolution."""
+
+    def __init__(self, config: DataConfig):
+        split = None if config.split == "all" else config.split
+        frames = range(config.frames)
+        resolution = config.loss_resolution
+        if config.source == GENERATE:
+            self.settings = generate_settings(config)
+            self._check_frames(config)
+            self.dataset = GeneratedDropDataset(
+                self.settings, split, views=[config.view], frames=frames, resolution=resolution
+            )
+            self.source = GENERATE
+        else:
+            root = Path(config.source)
+            if not root.is_dir():
+                raise InputError(
+                    "dataset folder not found (make it with `reconphys make-data`, see the "
+                    "config's header and docs/training.md)",
+                    source=str(root),
+                    field="data.source",
+                )
+            self.settings = read_manifest(root)["parsed_settings"]
+            self._check_frames(config)
+            self.dataset = DropDataset(
+                root, split, views=[config.view], frames=frames, resolution=resolution
+            )
+            self.source = str(root.resolve())
+        if len(self.dataset) == 0:
+            raise InputError(f"no samples in split {config.split!r}", field="data.split")
+
+    def _check_frames(self, config: DataConfig) -> None:
+        if config.frames > self.settings.num_frames:
+            raise InputError(
+                f"{config.frames} frames asked, the dataset's videos have "
+                f"{self.settings.num_frames}",
+                field="data.frames",
+            )
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def sample_id(self, index: int) -> str:
+        if isinstance(self.dataset, DropDataset):
+            return self.dataset.samples[index]["id"]
+        return self.dataset.samples[index].id
+
+    def asset(self, index: int) -> Asset:
+        """The sample's placed object with its true attributes and initial velocity."""
+        if isinstance(self.dataset, DropDataset):
+            return self.dataset.asset(index)
+        planned = self.dataset.samples[index]
+        obj = self.dataset.object(index)
+        spec = draw_sample(self.settings, obj.id, planned.index)
+        return sample_asset(obj, spec, place(obj, spec), self.settings)
+
+    def __getitem__(self, index: int) -> dict:
+        item = self.dataset[index]
+        return {
+            "frames": item["frames"],
+            "K": item["K"],
+            "world_to_cam": item["world_to_cam"],
+            "attributes": item["attributes"],
+            "id": item["id"],
+            "asset": self.asset(index),
+        }
+
+    def true_attributes(self) -> list[dict[str, float]]:
+        """The attributes of every sample (no simulation, no image I/O)."""
+        if isinstance(self.dataset, DropDataset):
+            return [dict(s["attributes"]) for s in self.dataset.samples]
+        out = []
+        for planned in self.dataset.samples:
+            spec = draw_sample(self.settings, planned.object.ref.id, planned.index)
+            out.append(dict(spec.attributes))
+        return out
+
+    def medians(self) -> dict[str, float]:
+        """Median of each attribute over the samples: the trivial predictor of this data."""
+        attributes = self.true_attributes()
+        return {n: float(statistics.median(a[n] for a in attributes)) for n in ATTRIBUTE_ORDER}
+
+    def fingerprint(self) -> str:
+        """Hash of the data settings and the sample list: a resumed run must see the same."""
+        ids = ",".join(self.sample_id(i) for i in range(len(self)))
+        text = f"{self.settings.fingerprint()}|{ids}"
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# ----------------------------------------------------------------------------------------------
+# order
+
+
+@lru_cache(maxsize=8)
+def epoch_permutation(num_samples: int, seed: int, epoch: int) -> tuple[int, ...]:
+    """The order of the samples in ``epoch``: a permutation drawn from (seed, epoch) only."""
+    rng = np.random.default_rng([seed, epoch, 0x7261696E])
+    return tuple(int(i) for i in rng.permutation(num_samples))
+
+
+def step_indices(
+    step: int,  # 1-based optimiser step
+    num_samples: int,
+    batch_size: int,  # global: samples per step over all ranks
+    seed: int,
+    rank: int = 0,
+    world_size: int = 1,
+) -> list[int]:
+    """The samples ``rank`` reads at ``step``: slots ``rank, rank + W, ...`` of the step's
+    ``batch_size`` consecutive slots in the stream of epoch permutations."""
+    first = (step - 1) * batch_size
+    out = []
+    for slot in range(first + rank, first + batch_size, world_size):
+        epoch, position = divmod(slot, num_samples)
+        out.append(epoch_permutation(num_samples, seed, epoch)[position])
+    return out
+
+
+class StepSampler(Sampler[list[int]]):
+    """Batch sampler of the steps ``first_step..last_step`` (1-based, inclusive) for one rank."""
+
+    def __init__(self, num_samples, batch_size, seed, first_step, last_step, rank=0, world_size=1):
+        self.args = (num_samples, batch_size, seed)
+        self.first_step, self.last_step = first_step, last_step
+        self.rank, self.world_size = rank, world_size
+
+    def __len__(self) -> int:
+        return max(0, self.last_step - self.first_step + 1)
+
+    def __iter__(self):
+        for step in range(self.first_step, self.last_step + 1):
+            yield step_indices(step, *self.args, self.rank, self.world_size)

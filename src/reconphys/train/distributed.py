@@ -1,0 +1,88 @@
+"""Multi-process training with ``torchrun`` (DDP): set up from the RANK / WORLD_SIZE variables.
+
+``torchrun --nproc_per_node N -m reconphys.cli train CONFIG`` starts N processes; each reads its
+rank from the environment, joins the process group (NCCL on CUDA, gloo on CPU), takes
+``batch_size / N`` samples of every global batch, and averages gradients with the others. Only
+rank 0 writes checkpoints, logs and the exported model. Without those variables (or with
+WORLD_SIZE = 1) training runs in the one process and none of this is used.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import torch
+import torch.distributed as dist
+
+from ..errors import InputError
+
+
+@dataclass(frozen=True)
+class Distributed:
+    rank: int = 0
+    local_rank: int = 0
+    world_size: int = 1
+
+    @property
+    def enabled(self) -> bool:
+        return self.world_size > 1
+
+    @property
+    def is_main(self) -> bool:
+        return self.rank == 0
+
+
+def _resolve_device(name: str, local_rank: int, distributed: bool) -> torch.device:
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name.startswith("cuda"):
+        if not torch.cuda.is_available():
+            raise InputError("CUDA is not available on this machine", field="train.device")
+        if distributed or name == "cuda":
+            index = local_rank if distributed else torch.cuda.current_device()
+            name = f"cuda:{index}"
+        torch.cuda.set_device(torch.device(name))
+    return torch.device(name)
+
+
+def setup(device_name: str) -> tuple[Distributed, torch.device]:
+    """Join the torchrun process group when launched by torchrun; the device of this process."""
+    world_size = int(os.environ.get("WORLD_SIZE", "1"))
+    if world_size <= 1:
+        return Distributed(), _resolve_device(device_name, 0, False)
+    rank = int(os.environ["RANK"])
+    local_rank = int(os.environ.get("LOCAL_RANK", rank))
+    device = _resolve_device(device_name, local_rank, True)
+    if not dist.is_initialized():
+        backend = "nccl" if device.type == "cuda" else "gloo"
+        dist.init_process_group(backend=backend, rank=rank, world_size=world_size)
+    return Distributed(rank, local_rank, world_size), device
+
+
+def cleanup(context: Distributed) -> None:
+    if context.enabled and dist.is_initialized():
+        dist.destroy_process_group()
+
+
+def all_reduce_mean(values: torch.Tensor, context: Distributed) -> torch.Tensor:
+    """The mean of ``values`` over the ranks (unchanged without DDP)."""
+    if not context.enabled:
+        return values
+    values = values.clone()
+    dist.all_reduce(values, op=dist.ReduceOp.SUM)
+    return values / context.world_size
+
+
+def barrier(context: Distributed) -> None:
+    if context.enabled:
+        dist.barrier()
+
+
+def broadcast_error(message: str | None, context: Distributed) -> str | None:
+    """Rank 0's error message (or None) on every rank, so all ranks stop together."""
+    if not context.enabled:
+        return message
+    box = [message]
+    dist.broadcast_object_list(box, src=0)
+    return box[0]

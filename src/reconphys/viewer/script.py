@@ -1,0 +1,147 @@
+"""Scripted, headless interaction: a JSON list of actions driving a :class:`ViewerSession`.
+
+The same controller API as the browser UI, without a browser (tests, batch renders). A script is a
+JSON list; each entry is an object with one action::
+
+    [
+      {"drop": 0.3},                                   lowest point 0.3 m above the ground, at rest
+      {"run": 30},                                     simulate 30 frames (0.03 s each)
+      {"set": {"stiffness": 600, "substeps": 40}},     attributes (m, k, d, f) and/or substeps
+      {"grab": {"name": "left", "at": "-x"}},          grip the object's extreme point along -x
+      {"grab": {"name": "right", "point": [0.2, 0, 0.1]}},   or the point nearest to a position
+      {"move": {"grip": "left", "by": [-0.1, 0, 0], "frames": 20}},  move over 20 frames
+      {"move": {"grip": "right", "to": [0.3, 0, 0.2], "frames": 20}},
+      {"release": "left"},                             or "all"
+      {"reset": true}                                  back to the asset's initial state
+    ]
+
+``move`` changes the grip's goal linearly over ``frames`` frames (simulating them); without
+``frames`` it only sets the goal. Positions are metres in the world frame (z up).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import torch
+
+from ..errors import InputError
+from .session import Recording, ViewerSession
+
+AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0)}
+AXES["-z"] = (2, -1.0)
+ACTIONS = ("run", "drop", "set", "grab", "move", "release", "reset")
+
+
+def load_script(path: str | os.PathLike) -> list[dict]:
+    """Read and check the shape of a script file (a JSON list of one-key objects)."""
+    try:
+        steps = json.loads(Path(path).read_text())
+    except OSError as e:
+        raise InputError(f"cannot read ({e.strerror or e})", source=str(path)) from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"not valid JSON ({e})", source=str(path)) from None
+    if not isinstance(steps, list):
+        raise InputError("expected a JSON list of actions", source=str(path))
+    return steps
+
+
+def _vector(value, where: str) -> torch.Tensor:
+    try:
+        vector = torch.tensor(value, dtype=torch.float32)
+    except (TypeError, ValueError):
+        vector = None
+    if vector is None or vector.shape != (3,) or not bool(torch.isfinite(vector).all()):
+        raise InputError(f"expected [x, y, z] in metres, got {value!r}", field=where)
+    return vector
+
+
+def _extreme_point(session: ViewerSession, axis: str, where: str) -> torch.Tensor:
+    if axis not in AXES:
+        raise InputError(f"expected one of {list(AXES)}, got {axis!r}", field=where)
+    dim, sign = AXES[axis]
+    means = session.gaussian_means()
+    return means[int(torch.argmax(sign * means[:, dim]))]
+
+
+def run_script(session: ViewerSession, steps: list[dict], record: bool = True) -> Recording | None:
+    """Apply ``steps`` in order (simulating in the calling thread); with ``record`` returns the
+    recording of every frame from the start of the script."""
+    if record:
+        session.start_recording()
+    for number, entry in enumerate(steps):
+        where = f"script[{number}]"
+        if not isinstance(entry, dict) or len(entry) != 1 or next(iter(entry)) not in ACTIONS:
+            raise InputError(f"expected an object with one key of {ACTIONS}", field=where)
+        action, value = next(iter(entry.items()))
+        where = f"{where}.{action}"
+        try:
+            _apply(session, action, value, where)
+        except InputError as e:
+            message = str(e)
+            if not message.startswith("script["):
+                raise InputError(message, field=where) from None
+            raise
+    return session.stop_recording() if record else None
+
+
+def _apply(session: ViewerSession, action: str, value, where: str) -> None:
+    if action == "run":
+        if not isinstance(value, int) or value < 0:
+            raise InputError(f"expected a frame count ≥ 0, got {value!r}", field=where)
+        session.advance(value)
+    elif action == "drop":
+        if not isinstance(value, int | float):
+            raise InputError(f"expected a height in metres, got {value!r}", field=where)
+        session.drop(float(value))
+    elif action == "reset":
+        session.reset()
+    elif action == "set":
+        if not isinstance(value, dict):
+            raise InputError("expected an object of attributes / substeps", field=where)
+        value = dict(value)
+        if "substeps" in value:
+            session.set_substeps(int(value.pop("substeps")))
+        session.set_attributes(**value)
+    elif action == "grab":
+        _grab(session, value, where)
+    elif action == "move":
+        _move(session, value, where)
+    elif action == "release" and value == "all":
+        session.release_all()
+    elif action == "release":
+        session.release(str(value))
+
+
+def _grab(session: ViewerSession, value, where: str) -> None:
+    if not isinstance(value, dict) or ("at" in value) == ("point" in value):
+        raise InputError('expected {"name": ..., "at": "+x"} or {"point": [x, y, z]}', field=where)
+    if "at" in value:
+        point = _extreme_point(session, value["at"], where)
+    else:
+        point = _vector(value["point"], where)
+    count = value.get("anchors")
+    session.grab(point, count=int(count) if count else None, name=value.get("name"))
+
+
+def _move(session: ViewerSession, value, where: str) -> None:
+    if not isinstance(value, dict) or "grip" not in value or ("by" in value) == ("to" in value):
+        raise InputError('expected {"grip": NAME, "by" or "to": [x, y, z]}', field=where)
+    name = str(value["grip"])
+    grips = session.grips()
+    if name not in grips:
+        raise InputError(f"no such grip (have: {', '.join(grips) or 'none'})", field=where)
+    start = grips[name]["goal"]
+    if "by" in value:
+        goal = start + _vector(value["by"], where)
+    else:
+        goal = _vector(value["to"], where)
+    frames = int(value.get("frames", 0))
+    if frames <= 0:
+        session.move_grip(name, goal)
+        return
+    for frame in range(1, frames + 1):
+        session.move_grip(name, start + (goal - start) * (frame / frames))
+        session.advance(1)

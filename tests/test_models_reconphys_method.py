@@ -1,0 +1,107 @@
+"""The ``reconphys`` method of ``evaluate``: a trained predictor's attributes on the true geometry.
+
+A random tiny predictor (not the shipped model) on a one-sample dataset at 16 px. The module runs
+torch and Numba on one thread: on a 2-core machine shared with other jobs, more threads than free
+cores slow the simulation many times over.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from reconphys.cli import app
+from reconphys.data import make_dataset, make_settings
+from reconphys.eval.methods import METHODS, MethodOptions
+from reconphys.eval.samples import EvalSet
+from reconphys.models import shipped
+from reconphys.models.physics_predictor import PhysicsPredictor, PredictorConfig
+from reconphys.models.shipped import ENV_VAR, load_predictor, model_metadata, save_predictor
+from reconphys.threads import set_cpu_threads
+
+runner = CliRunner()
+TINY = PredictorConfig(
+    encoder_channels=(4,), token_channels=8, trunk_blocks=1, attention_heads=2,
+    mlp_hidden=(8,), num_frames=4, resolution=16,
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    set_cpu_threads(1)
+    yield
+    set_cpu_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    root = tmp_path_factory.mktemp("method") / "data"
+    settings = make_settings(
+        objects=0, test_objects=1, test_samples_per_object=1, resolution=16, num_gaussians=200,
+        num_anchors=24, num_neighbors=6, min_substeps=20, seed=5,
+    )  # fmt: skip
+    make_dataset(settings, root, workers=1, device="cpu")
+    return root
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    torch.manual_seed(3)
+    path = tmp_path_factory.mktemp("model") / "tiny.safetensors"
+    return save_predictor(PhysicsPredictor(TINY), path, model_metadata(TINY, 1, 0.03))
+
+
+def test_predicts_from_the_model_view_on_the_true_geometry(dataset, model_path):
+    sample = EvalSet(dataset, "test").load(0)
+    options = MethodOptions(trivial=EvalSet(dataset, "test").trivial_attributes(), model=model_path)
+    method = METHODS["reconphys"](options)
+    assert method.uses_ground_truth  # reported as an upper bound, beside trivial
+    prediction = method.predict(sample)
+    expected = load_predictor(model_path).predict(sample.frames[1:2])  # view 1, as trained
+    for name, value in prediction.attributes.items():
+        assert value == pytest.approx(float(expected[name][0]), rel=1e-6)
+    assert prediction.attributes != sample.attributes
+    truth = sample.true_asset
+    assert torch.equal(prediction.asset.x0, truth.x0) and torch.equal(prediction.asset.v0, truth.v0)
+    assert prediction.asset.gaussians is truth.gaussians
+
+
+def test_evaluate_command_reports_reconphys_beside_trivial(dataset, model_path, tmp_path):
+    out = tmp_path / "report"
+    args = [
+        "evaluate", "--data", str(dataset), "--out", str(out), "--methods", "trivial,reconphys",
+        "--model", str(model_path), "--emd-points", "32", "--chamfer-points", "64",
+        "--sheet-samples", "0",
+    ]  # fmt: skip
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert list(metrics["methods"]) == ["trivial", "reconphys"]
+    entry = metrics["methods"]["reconphys"]
+    assert entry["upper_bound"] and str(model_path) in entry["description"]
+    assert entry["reconstruction"]["psnr"] is not None and entry["future"]["psnr"] is not None
+    assert "beats_trivial" in entry
+    assert "reconphys †" in (out / "report.md").read_text()
+
+
+def test_evaluate_model_errors_are_one_line(dataset, tmp_path, monkeypatch):
+    def run(*extra):
+        out = tmp_path / "report"
+        result = runner.invoke(app, ["evaluate", "--data", str(dataset), "--out", str(out), *extra])
+        lines = [line for line in result.output.splitlines() if line.strip()]
+        assert result.exit_code == 2, result.output
+        return lines[-1]
+
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    monkeypatch.setattr(shipped, "SHIPPED_PATH", tmp_path / "physics_predictor.safetensors")
+    line = run("--methods", "trivial,reconphys")
+    assert line.startswith("error: ") and "no trained physics predictor" in line
+    assert "reconphys train" in line
+    line = run("--methods", "reconphys", "--model", str(tmp_path / "none.safetensors"))
+    assert "model file not found" in line
+    line = run("--methods", "trivial", "--model", str(tmp_path / "none.safetensors"))
+    assert "--model: only the reconphys method uses a model" in line

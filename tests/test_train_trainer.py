@@ -1,0 +1,260 @@
+"""The training loop at tiny size (configs/tiny.toml: 16 px, 24 anchors, 4 frames, batch 2).
+
+Exact resume after an interruption and after SIGKILL, skipped non-finite steps, the three
+objectives, the exported model, and the command's one-line errors.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+from safetensors.torch import load_file
+from typer.testing import CliRunner
+
+from reconphys.cli import app
+from reconphys.data import make_dataset
+from reconphys.models.shipped import load_predictor
+from reconphys.threads import set_cpu_threads
+from reconphys.train import trainer as trainer_module
+from reconphys.train.config import load_config
+from reconphys.train.data import TrainingSamples
+from reconphys.train.trainer import Trainer, train
+
+ROOT = Path(__file__).resolve().parent.parent
+TINY = ROOT / "configs" / "tiny.toml"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """torch and Numba on one thread (as tiny.toml's train.threads): on a 2-core machine shared
+    with other jobs, more threads than free cores slow the simulation many times over."""
+    threads = torch.get_num_threads()
+    set_cpu_threads(1)
+    yield
+    set_cpu_threads(threads)
+
+
+def tiny(out: Path, *overrides: str):
+    return load_config(TINY, [f"train.out={out}", *overrides])
+
+
+def read_log(out: Path) -> dict[int, dict]:
+    return {r["step"]: r for r in map(json.loads, (out / "log.jsonl").read_text().splitlines())}
+
+
+def same_course(a: dict, b: dict) -> bool:
+    keys = ("loss", "photometric", "attribute_error", "grad_norm", "lr", "skipped")
+    return all(a[k] == b[k] for k in keys if k in a)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The uninterrupted 6-step run."""
+    out = tmp_path_factory.mktemp("reference")
+    result = train(tiny(out), progress=False, log=lambda line: None)
+    assert result.step == 6 and result.first_step == 1
+    return out
+
+
+class Killed(Exception):
+    pass
+
+
+def test_resume_after_an_interruption_repeats_the_run(reference, tmp_path):
+    def kill_at_5(step, record):
+        if step == 5:  # after the checkpoint of step 3, with steps 4 and 5 already logged
+            raise Killed
+
+    with pytest.raises(Killed):
+        train(tiny(tmp_path), progress=False, callback=kill_at_5, log=lambda line: None)
+    assert sorted(read_log(tmp_path)) == [1, 2, 3, 4, 5]
+    lines = []
+    result = train(tiny(tmp_path), progress=False, log=lines.append)
+    assert result.first_step == 4 and result.step == 6
+    assert any("from step 3" in line for line in lines)
+    expected, resumed = read_log(reference), read_log(tmp_path)
+    assert sorted(resumed) == list(range(1, 7))  # steps 4–5 of the killed run were dropped
+    assert all(same_course(expected[s], resumed[s]) for s in range(1, 7)), (expected, resumed)
+    assert expected[6]["loss"] != expected[4]["loss"]  # the run moves: the comparison can fail
+    a, b = load_file(reference / "model.safetensors"), load_file(tmp_path / "model.safetensors")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_resume_after_sigkill(reference, tmp_path):
+    """A real kill: the command is killed once step 3 is logged; the run resumes from its last
+    checkpoint (every 2 steps) and reproduces the uninterrupted losses."""
+    command = [
+        sys.executable, "-m", "reconphys.cli", "train", str(TINY), f"train.out={tmp_path}",
+        "train.steps=1000", "train.checkpoint_every=2", "--no-progress",
+    ]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    log = tmp_path / "log.jsonl"
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline and process.poll() is None:
+            if log.is_file() and len(log.read_text().splitlines()) >= 3:
+                break
+            time.sleep(0.05)
+    finally:
+        os.kill(process.pid, signal.SIGKILL)
+        _, stderr = process.communicate()
+    assert process.returncode == -signal.SIGKILL, stderr.decode()
+    assert (tmp_path / "checkpoint.pt").is_file()
+    assert not list(tmp_path.glob(".*.tmp"))  # or only a temporary file that is never read
+    result = train(tiny(tmp_path, "train.steps=6"), progress=False, log=lambda line: None)
+    expected, resumed = read_log(reference), read_log(tmp_path)
+    assert result.first_step >= 3  # after the checkpoint of step 2 (or a later one)
+    assert all(same_course(expected[s], resumed[s]) for s in range(1, 7))
+
+
+def test_a_non_finite_loss_skips_the_step(tmp_path, monkeypatch):
+    original = trainer_module.compute_losses
+    calls = []
+
+    def nan_at_step_2(*args, **kwargs):
+        terms = original(*args, **kwargs)
+        calls.append(1)
+        if len(calls) == 2:
+            terms["loss"] = terms["loss"] * float("nan")
+        return terms
+
+    monkeypatch.setattr(trainer_module, "compute_losses", nan_at_step_2)
+    weights = {}
+    config = tiny(tmp_path, "objective.kind=supervised", "train.steps=3")
+    run = Trainer(config, progress=False, log=lambda line: None)
+    threads = []
+
+    def snapshot(step, record):
+        weights[step] = [p.detach().clone() for p in run.model.parameters()]
+        threads.append(torch.get_num_threads())
+
+    run.callback = snapshot
+    before = torch.get_num_threads()
+    with pytest.warns(UserWarning, match="step 2: non-finite loss"):
+        run.run()
+    assert threads == [1, 1, 1] and torch.get_num_threads() == before  # train.threads = 1
+    log = read_log(tmp_path)
+    assert [log[s]["skipped_step"] for s in (1, 2, 3)] == [False, True, False]
+    assert log[3]["skipped"] == 1
+    assert all(torch.equal(a, b) for a, b in zip(weights[1], weights[2], strict=True))
+    assert not all(torch.equal(a, b) for a, b in zip(weights[2], weights[3], strict=True))
+    assert all(torch.isfinite(t).all() for t in load_file(tmp_path / "model.safetensors").values())
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """A tiny dataset on disk made with the same settings as tiny.toml's generated one."""
+    config = load_config(TINY)
+    root = tmp_path_factory.mktemp("data") / "tiny"
+    make_dataset(TrainingSamples(config.data).settings, root, workers=1, device="cpu")
+    return root
+
+
+def test_supervised_training_from_a_folder_learns_and_exports(folder, tmp_path):
+    config = tiny(
+        tmp_path, f"data.source={folder}", "data.num_workers=1", "objective.kind=supervised",
+        "train.steps=20", "optim.lr=1e-2",
+    )  # fmt: skip
+    result = train(config, progress=False, log=lambda line: None)
+    log = read_log(tmp_path)
+    first, last = (log[1]["loss"] + log[2]["loss"]) / 2, (log[19]["loss"] + log[20]["loss"]) / 2
+    assert last < 0.5 * first, (first, last)  # each pair of steps sees all 4 samples
+    assert "photometric" not in log[1]
+    loaded = load_predictor(tmp_path)  # a training output folder is a model path
+    meta = loaded.metadata
+    assert meta["input"] == {"view": 0, "frames": 4, "resolution": 16, "frame_dt": 0.03}
+    training = meta["training"]
+    assert training["objective"] == "supervised" and training["steps"] == 20
+    assert training["geometry"].startswith("ground truth")
+    assert training["data"]["source"] == str(folder.resolve()) and training["data"]["samples"] == 4
+    assert set(training["attribute_medians"]) == {"mass", "stiffness", "damping", "friction"}
+    frames = torch.rand(2, 4, 16, 16, 3)
+    with torch.no_grad():
+        expected = result.model.eval()(frames)["unit"]
+    torch.testing.assert_close(loaded.predict(frames)["unit"], expected, rtol=0, atol=1e-6)
+
+
+def test_mixed_objective_adds_both_terms(tmp_path):
+    config = tiny(tmp_path, "objective.kind=mixed", "objective.supervised_weight=0.5",
+                  "train.steps=1")  # fmt: skip
+    train(config, progress=False, log=lambda line: None)
+    record = read_log(tmp_path)[1]
+    assert record["photometric"] > 0 and record["supervised"] > 0
+    total = record["photometric"] + 0.5 * record["supervised"]
+    assert record["loss"] == pytest.approx(total, rel=1e-6)
+    assert json.loads((tmp_path / "model.json").read_text())["training"]["objective"] == "mixed"
+
+
+# --- the command ------------------------------------------------------------------------------
+
+
+def test_train_command_runs_resumes_and_logs(tmp_path):
+    out = tmp_path / "run"
+    args = ["train", str(TINY), f"train.out={out}", "train.steps=2", "train.tensorboard=true"]
+    result = runner.invoke(app, [*args, "--no-progress"])
+    assert result.exit_code == 0, result.output
+    assert "trained 2 steps" in result.output and "model.safetensors" in result.output
+    for name in ("checkpoint.pt", "log.jsonl", "config.json", "model.safetensors", "model.json"):
+        assert (out / name).is_file(), name
+    record = read_log(out)[2]
+    assert {"loss", "lr", "grad_norm", "samples_per_s", "seconds", "skipped"} <= set(record)
+    try:
+        import tensorboard  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        assert list((out / "tensorboard").glob("events.out.tfevents.*"))
+
+    again = runner.invoke(app, [*args, "--no-progress"])
+    assert again.exit_code == 0 and "nothing to do" in again.output
+    other = runner.invoke(app, [*args, "optim.lr=0.5", "--no-progress"])
+    assert other.exit_code == 2 and "optim.lr" in other.output and "--overwrite" in other.output
+    fresh = runner.invoke(app, [*args, "optim.lr=0.5", "--overwrite", "--no-progress"])
+    assert fresh.exit_code == 0, fresh.output
+    assert read_log(out)[1]["lr"] == 0.5
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["{tmp}/missing.toml"], "config file not found"),
+        (["{tiny}", "optim.learning_rate=1"], "optim.learning_rate: unknown key"),
+        (["{tiny}", "train.steps=many"], "train.steps: expected an integer, got 'many'"),
+        (["{tiny}", "data.source={tmp}/no"], "no [data.source]: dataset folder not found"),
+        (["{tiny}", "data.generate.num_anchors=2"], "data.generate: --num-anchors: must be"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
+    args = [a.format(tmp=tmp_path, tiny=TINY) for a in args]
+    result = runner.invoke(app, ["train", *args, f"train.out={tmp_path}/out", "--no-progress"])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], lines
+    assert not (tmp_path / "out").exists()  # nothing written
+
+
+def test_plot_training_draws_the_curves(reference, tmp_path):
+    import importlib.util
+
+    from PIL import Image
+
+    spec = importlib.util.spec_from_file_location(
+        "plot_training", ROOT / "benchmarks" / "plot_training.py"
+    )
+    plot_training = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(plot_training)
+    records = plot_training.read_log(reference)
+    assert [r["step"] for r in records] == list(range(1, 7))
+    path = tmp_path / "curves.png"
+    plot_training.plot([("tiny", records), ("again", records)], path, "step", 3)
+    image = Image.open(path)
+    assert image.size == (1500, 520) and len(image.getcolors(1 << 16)) > 10
