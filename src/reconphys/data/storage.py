@@ -89,7 +89,7 @@ def write_json(path: Path, data: dict) -> None:
         raise
 
 
-def read_json(path: Path, expected_format: str) -> dict:
+def read_json(path: Path, expected_format: str, version: int = VERSION) -> dict:
     if not path.is_file():
         raise InputError("file not found", source=str(path))
     try:
@@ -98,7 +98,7 @@ def read_json(path: Path, expected_format: str) -> dict:
         raise InputError(f"not valid JSON ({e})", source=str(path)) from None
     if not isinstance(data, dict) or data.get("format") != expected_format:
         raise InputError(f"expected format {expected_format!r}", source=str(path), field="format")
-    if data.get("version") != VERSION:
+    if data.get("version") != version:
         raise InputError(f"version {data.get('version')!r} is not supported", str(path), "version")
     return data
 

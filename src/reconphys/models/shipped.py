@@ -20,6 +20,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from ..data.storage import read_json
 from ..errors import InputError
 from ..physics.model import ATTRIBUTE_RANGES
 from .physics_predictor import (
@@ -147,15 +148,7 @@ def _read_metadata(path: Path) -> dict:
     if not json_path.is_file():
         raise InputError(f"its config {json_path.name} is missing (written beside the weights)",
                          source=str(path))  # fmt: skip
-    try:
-        metadata = json.loads(json_path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise InputError(f"not valid JSON ({e})", source=str(json_path)) from None
-    if not isinstance(metadata, dict) or metadata.get("format") != FORMAT:
-        raise InputError(f"expected format {FORMAT!r}", source=str(json_path), field="format")
-    if metadata.get("version") != VERSION:
-        raise InputError(f"version {metadata.get('version')!r} is not supported",
-                         source=str(json_path), field="version")  # fmt: skip
+    metadata = read_json(json_path, FORMAT, VERSION)
     for key in ("predictor", "input"):
         if not isinstance(metadata.get(key), dict):
             raise InputError("missing", source=str(json_path), field=key)
