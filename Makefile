@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DEMO_OUT ?= demo_out
 
-.PHONY: install demo test lint bench clean
+.PHONY: install demo test lint bench model clean
 
 install: $(VENV)/.installed
 
@@ -32,6 +32,21 @@ test: lint
 bench: install
 	$(BIN)/python benchmarks/bench_simulator.py
 	$(BIN)/python benchmarks/bench_renderer.py
+
+# The shipped physics predictor's recipe (docs/training.md "Results"; ~75 min on 2 CPU cores):
+# the cpu_small data, supervised pre-training on the observables, a mixed photometric fine-tune,
+# then the model is copied to the package's weights.
+CPU_SMALL := configs/cpu_small.toml objective.supervised_target=observables --no-progress
+model: install
+	$(BIN)/reconphys make-data --objects 40 --test-objects 6 --samples-per-object 6 \
+	    --test-samples-per-object 2 --resolution 32 --out data/cpu_small
+	$(BIN)/reconphys train $(CPU_SMALL) objective.kind=supervised train.steps=2000 \
+	    train.batch_size=8 train.checkpoint_every=250 train.out=runs/cpu_small_sup_obs
+	$(BIN)/reconphys train $(CPU_SMALL) objective.kind=mixed train.init=runs/cpu_small_sup_obs \
+	    optim.lr=3e-4 optim.warmup_steps=0 train.steps=150 train.checkpoint_every=25 \
+	    train.log_every=5 train.out=runs/cpu_small_mixed
+	cp runs/cpu_small_mixed/model.safetensors src/reconphys/weights/physics_predictor.safetensors
+	cp runs/cpu_small_mixed/model.json src/reconphys/weights/physics_predictor.json
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache .ruff_cache

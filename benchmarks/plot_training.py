@@ -1,7 +1,8 @@
 """Training curves from ``reconphys train`` logs (OUT/log.jsonl), drawn with Pillow.
 
-One PNG with three panels — the minimised loss (log10), the normalised attribute error (L1 to
-the truth in [0, 1] per attribute, logged whatever the objective), and the photometric term
+One PNG with four panels — the minimised loss (log10), the normalised attribute error (L1 to
+the truth in [0, 1] per attribute, logged whatever the objective), the same for the observables
+(log m, log k/m, log d/m, f; runs logged before it existed leave it out) and the photometric term
 (log10, where present) — one colour per run, raw values faint and a moving average on top.
 
     python benchmarks/plot_training.py runs/self:self-supervised runs/sup:supervised \\
@@ -25,6 +26,7 @@ BLACK, WHITE = (0, 0, 0), (255, 255, 255)
 PANELS = (
     ("loss", "loss (minimised)", True),
     ("attribute_error", "attribute error (normalised L1)", False),
+    ("observable_error", "observable error (log m, k/m, d/m; f)", False),
     ("photometric", "photometric MSE", True),
 )
 
@@ -62,7 +64,7 @@ def _font(size: int):
 
 
 def plot(runs: list[tuple[str, list[dict]]], path: Path, x_key: str, smooth: int) -> None:
-    width, height = 1500, 520
+    width, height = 60 + 480 * len(PANELS), 520
     image = Image.new("RGB", (width, height), WHITE)
     draw = ImageDraw.Draw(image)
     x_label = "hours" if x_key == "elapsed" else "step"

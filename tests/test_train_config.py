@@ -84,6 +84,7 @@ def test_overrides_are_typed():
         ("train.amp=yes", "train.amp: expected true or false"),
         ("train.steps=0", "train.steps: must be ≥ 1"),
         ("objective.kind=magic", "objective.kind: expected one of self_supervised"),
+        ("objective.supervised_target=pixels", "objective.supervised_target: expected one of"),
         ("data.generate.colour=3", "data.generate.colour: not a make-data setting"),
         ("data.generate.objects=many", "data.generate.objects: expected an integer"),
         ("model.num_frames=8", "model.num_frames: set data.frames instead"),

@@ -21,6 +21,7 @@ from typer.testing import CliRunner
 
 from reconphys.cli import app
 from reconphys.data import make_dataset
+from reconphys.errors import InputError
 from reconphys.models.shipped import load_predictor
 from reconphys.threads import set_cpu_threads
 from reconphys.train import trainer as trainer_module
@@ -194,6 +195,22 @@ def test_mixed_objective_adds_both_terms(tmp_path):
     assert json.loads((tmp_path / "model.json").read_text())["training"]["objective"] == "mixed"
 
 
+def test_init_starts_from_a_trained_model(reference, tmp_path):
+    """train.init loads a model's weights (fine-tuning); a mismatched network is refused."""
+    config = tiny(tmp_path / "tuned", f"train.init={reference}", "objective.kind=supervised",
+                  "train.steps=1", "optim.lr=1e-30")  # fmt: skip
+    result = train(config, progress=False, log=lambda line: None)
+    start = load_file(str(reference / "model.safetensors"))
+    for name, value in result.model.state_dict().items():  # one step of lr 1e-30 moves nothing
+        torch.testing.assert_close(value, start[name], rtol=1e-6, atol=1e-12)
+    init = load_predictor(tmp_path / "tuned").metadata["training"]["init"]
+    assert init["objective"] == "self_supervised" and init["steps"] == 6
+    other = tiny(tmp_path / "other", f"train.init={reference}", "model.trunk_blocks=2")
+    with pytest.raises(InputError, match="predictor config differs"):
+        train(other, progress=False, log=lambda line: None)
+    assert not (tmp_path / "other").exists()  # checked before the output folder is made
+
+
 # --- the command ------------------------------------------------------------------------------
 
 
@@ -256,5 +273,6 @@ def test_plot_training_draws_the_curves(reference, tmp_path):
     assert [r["step"] for r in records] == list(range(1, 7))
     path = tmp_path / "curves.png"
     plot_training.plot([("tiny", records), ("again", records)], path, "step", 3)
-    image = Image.open(path)
-    assert image.size == (1500, 520) and len(image.getcolors(1 << 16)) > 10
+    with Image.open(path) as image:
+        assert image.size == (60 + 480 * len(plot_training.PANELS), 520)
+        assert len(image.getcolors(1 << 16)) > 10

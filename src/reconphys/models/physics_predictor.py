@@ -10,7 +10,8 @@ space of the supervised loss. (The reference code maps linearly and lets frictio
 keep the data's ranges so that every prediction is a valid, stable simulator input.)
 
 Encoders are looked up by name in :data:`ENCODERS`; the default ``small_cnn`` is trained from
-scratch. Pretrained encoders (timm, transformers) register here too and load from local files.
+scratch. Pretrained encoders (``timm`` by name, ``transformers`` from a local folder such as
+InternViT) are in :mod:`reconphys.models.pretrained` and load from local files only.
 """
 
 from __future__ import annotations
@@ -231,3 +232,8 @@ class PhysicsPredictor(nn.Module):
         pooled = self.temporal(tokens).mean(1)
         unit = torch.sigmoid(self.head(pooled))
         return {"unit": unit, **attributes_from_unit(unit)}
+
+
+# Pretrained encoders (timm, transformers) register themselves on import; they need optional
+# packages only when used.
+from . import pretrained  # noqa: E402, F401

@@ -39,6 +39,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10 without tomli
 
 GENERATE = "generate"  # data.source value: generate the samples on the fly (no folder)
 OBJECTIVES = ("self_supervised", "supervised", "mixed")
+SUPERVISED_TARGETS = ("attributes", "observables")  # train.objective.supervised_loss' targets
 SCHEDULES = ("cosine", "constant")
 AMP_DTYPES = ("bfloat16", "float16")
 SPLITS = ("train", "test", "all")
@@ -66,6 +67,7 @@ class DataConfig:
 class ObjectiveConfig:
     kind: str = "self_supervised"  # self_supervised, supervised or mixed
     supervised_weight: float = 1e-3  # mixed: loss = photometric + supervised_weight × supervised
+    supervised_target: str = "attributes"  # attributes (m, k, d, f) or observables (k/m, d/m, f)
     detach_window: int = 1  # frames between detaches of the simulated state (paper: 1)
     min_substeps: int = 0  # floor of the simulator's substeps per frame (0: the dataset's)
 
@@ -95,6 +97,7 @@ class RunConfig:
     log_every: int = 10  # steps between console lines and TensorBoard points
     tensorboard: bool = True  # write OUT/tensorboard when the tensorboard package is installed
     out: str = "runs/train"  # output folder: checkpoint, logs, exported model
+    init: str = ""  # weights to start from (a model .safetensors or a training OUT); "": random
 
 
 @dataclass
@@ -419,6 +422,7 @@ def _validate(config: TrainConfig) -> None:
     )
     _require(all(w >= 1 for w in m.mlp_hidden), "model.mlp_hidden", "widths must be ≥ 1")
     _choice(o.kind, OBJECTIVES, "objective.kind")
+    _choice(o.supervised_target, SUPERVISED_TARGETS, "objective.supervised_target")
     _require(
         math.isfinite(o.supervised_weight) and o.supervised_weight >= 0,
         "objective.supervised_weight",

@@ -13,6 +13,7 @@ Gaussians: ground-truth geometry, an upper bound that reports must label as such
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -22,7 +23,9 @@ from torch import Tensor
 from ..assets.asset import Asset
 from ..models.physics_predictor import ATTRIBUTE_ORDER, normalize_attributes
 from ..physics import SpringMassModel, State, deform_means, rollout, stable_substeps
+from ..physics.model import ATTRIBUTE_RANGES
 from ..render import Cameras, render
+from .config import SUPERVISED_TARGETS
 
 
 @dataclass
@@ -115,10 +118,38 @@ def photometric_loss(
     return torch.stack(losses).mean()
 
 
+def _log_ratio_bounds(numerator: str) -> tuple[float, float]:
+    """Bounds of log(numerator / mass) over the DESIGN §5 ranges."""
+    (n_low, n_high), (m_low, m_high) = ATTRIBUTE_RANGES[numerator], ATTRIBUTE_RANGES["mass"]
+    return math.log(n_low / m_high), math.log(n_high / m_low)
+
+
+def normalize_observables(attributes: Tensor) -> Tensor:
+    """[..., 4] attributes (ATTRIBUTE_ORDER) → [..., 4] (log m, log k/m, log d/m, f), each scaled
+    to [0, 1] over its range: the quantities a video determines (DESIGN §4), and the mass."""
+    mass, stiffness, damping, friction = attributes.unbind(-1)
+    columns = [normalize_attributes(attributes)[..., 0]]
+    for name, value in (("stiffness", stiffness), ("damping", damping)):
+        low, high = _log_ratio_bounds(name)
+        columns.append((torch.log(value / mass) - low) / (high - low))
+    columns.append(friction)
+    return torch.stack(columns, -1)
+
+
 def supervised_loss(
     attributes: dict[str, Tensor],  # predicted, name → [B]
     true: Tensor,  # [B, 4] true attributes in ATTRIBUTE_ORDER
+    target: str = "attributes",
 ) -> Tensor:
-    """L1 between predicted and true attributes, both normalised to [0, 1] (log m, k, d)."""
+    """Mean L1 between predicted and true values, normalised to [0, 1] ranges.
+
+    ``target="attributes"``: m, k, d (log scale) and f — the paper's supervised baseline.
+    ``target="observables"``: log m, log k/m, log d/m and f (:func:`normalize_observables`): the
+    unobservable absolute scale no longer leaks into the stiffness and damping errors.
+    """
     predicted = torch.stack([attributes[n] for n in ATTRIBUTE_ORDER], -1)
-    return (normalize_attributes(predicted) - normalize_attributes(true)).abs().mean()
+    if target == "attributes":
+        return (normalize_attributes(predicted) - normalize_attributes(true)).abs().mean()
+    if target == "observables":
+        return (normalize_observables(predicted) - normalize_observables(true)).abs().mean()
+    raise ValueError(f"target: expected one of {SUPERVISED_TARGETS}, got {target!r}")

@@ -42,7 +42,13 @@ from torch.utils.data import DataLoader
 from .. import __version__
 from ..errors import InputError
 from ..models.physics_predictor import ATTRIBUTE_ORDER, PhysicsPredictor, resize_frames
-from ..models.shipped import TRAINED_NAME, model_metadata, save_predictor
+from ..models.shipped import (
+    TRAINED_NAME,
+    LoadedPredictor,
+    load_predictor,
+    model_metadata,
+    save_predictor,
+)
 from ..render import Cameras
 from ..threads import set_cpu_threads
 from . import distributed
@@ -115,7 +121,8 @@ def compute_losses(
             min_substeps=physics.min_substeps,
         )
     if kind in ("supervised", "mixed"):
-        terms["supervised"] = supervised_loss(attributes, batch.attributes)
+        target = config.objective.supervised_target
+        terms["supervised"] = supervised_loss(attributes, batch.attributes, target)
     if kind == "self_supervised":
         terms["loss"] = terms["photometric"]
     elif kind == "supervised":
@@ -127,6 +134,7 @@ def compute_losses(
     with torch.no_grad():
         detached = {k: v.detach() for k, v in attributes.items()}
         terms["attribute_error"] = supervised_loss(detached, batch.attributes)
+        terms["observable_error"] = supervised_loss(detached, batch.attributes, "observables")
     return terms
 
 
@@ -168,6 +176,7 @@ class Trainer:
             set_cpu_threads(self.config.train.threads)
         torch.set_flush_denormal(True)  # settling objects make float32 denormals (slow on CPU)
         self.data = TrainingSamples(self.config.data)
+        self.init = self._load_init(self.config.train.init) if self.config.train.init else None
 
     def _build(self) -> None:
         config, context = self.config, self.context
@@ -198,9 +207,31 @@ class Trainer:
         amp = config.train.amp and cuda
         self.autocast_dtype = getattr(torch, config.train.amp_dtype) if amp else None
         self.scaler = torch.amp.GradScaler("cuda", enabled=self.autocast_dtype == torch.float16)
+        self.init_source = None
+        if self.init is not None:  # before the optimiser state exists; a resume overrides it
+            self.model.load_state_dict(self.init.model.state_dict())
+            trained = self.init.metadata.get("training") or {}
+            self.init_source = {
+                "path": str(self.init.path),
+                "objective": trained.get("objective"),
+                "steps": trained.get("steps"),
+            }
         self.step = 0
         self.skipped = 0
         self.elapsed_before = 0.0
+
+    def _load_init(self, path: str) -> LoadedPredictor:
+        """The model ``train.init`` names (fine-tuning), checked against this run's network."""
+        loaded = load_predictor(path)
+        source = str(loaded.path)
+        if loaded.model.config != self.config.predictor_config():
+            raise InputError("its predictor config differs from this run's [model]/[data] "
+                             "settings", source=source, field="train.init")  # fmt: skip
+        view = self.config.data.view
+        if loaded.view != view:
+            message = f"trained on view {loaded.view}, this run reads view {view}"
+            raise InputError(message, source=source, field="train.init")
+        return loaded
 
     def _resume(self) -> None:
         path = self.out / CHECKPOINT
@@ -264,6 +295,7 @@ class Trainer:
             "batch_size": c.train.batch_size,
             "skipped_steps": self.skipped,
             "geometry": GEOMETRY,
+            "init": self.init_source,
             "data": {
                 "source": d.source,
                 "split": c.data.split,
