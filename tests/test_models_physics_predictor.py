@@ -80,3 +80,21 @@ def test_bad_input_and_unknown_encoder():
 
 def test_config_round_trip():
     assert PredictorConfig.from_dict(TINY.to_dict()) == TINY
+
+
+def test_coordinate_channels_make_pooled_features_see_position():
+    """Without coords the stride-4 CNN is translation-equivariant (a blob moved by 4 px away from
+    the borders gives the same spatially averaged features); with coords the average moves."""
+    from reconphys.models.physics_predictor import SmallCNN
+
+    image = torch.zeros(2, 3, 64, 64)  # receptive field ±9 px: the blobs never see a border
+    image[0, :, 28:34, 24:30] = 1.0
+    image[1, :, 28:34, 32:38] = 1.0  # the same blob 8 px to the right
+    torch.manual_seed(0)
+    plain, coords = SmallCNN((4, 8)), SmallCNN((4, 8), coords=True)
+    with torch.no_grad():
+        p, c = plain(image).mean((-2, -1)), coords(image).mean((-2, -1))
+    torch.testing.assert_close(p[0], p[1], rtol=0, atol=1e-5)
+    assert (c[0] - c[1]).abs().max() > 1e-3
+    with pytest.raises(ValueError, match="coords"):
+        PhysicsPredictor(PredictorConfig(extra={"colour": True}))

@@ -75,11 +75,17 @@ def _group_norm(channels: int) -> nn.GroupNorm:
 
 
 class SmallCNN(nn.Module):
-    """Stride-2 conv stages with GroupNorm and SiLU: [N, 3, H, W] → [N, C, H/2^S, W/2^S]."""
+    """Stride-2 conv stages with GroupNorm and SiLU: [N, 3, H, W] → [N, C, H/2^S, W/2^S].
 
-    def __init__(self, channels: tuple[int, ...]):
+    ``coords=True`` appends two channels holding the pixel's x and y in [−1, 1] to the input
+    (CoordConv): the trunk averages its maps over space, and without them the features say
+    little about *where* the object is — e.g. how far it slides (friction).
+    """
+
+    def __init__(self, channels: tuple[int, ...], coords: bool = False):
         super().__init__()
-        layers, previous = [], 3
+        self.coords = coords
+        layers, previous = [], 5 if coords else 3
         for c in channels:
             layers += [
                 nn.Conv2d(previous, c, 3, stride=2, padding=1),
@@ -94,12 +100,21 @@ class SmallCNN(nn.Module):
         self.out_channels = previous
 
     def forward(self, images: Tensor) -> Tensor:
+        if self.coords:
+            n, _, h, w = images.shape
+            y = torch.linspace(-1, 1, h, device=images.device, dtype=images.dtype)
+            x = torch.linspace(-1, 1, w, device=images.device, dtype=images.dtype)
+            grid = torch.stack(torch.meshgrid(x, y, indexing="xy"))  # [2, H, W]: x, y
+            images = torch.cat([images, grid.expand(n, 2, h, w)], 1)
         return self.layers(images)
 
 
 @register_encoder("small_cnn")
 def _small_cnn(config: PredictorConfig) -> nn.Module:
-    return SmallCNN(config.encoder_channels)
+    unknown = set(config.extra) - {"coords"}
+    if unknown:
+        raise ValueError(f"extra: small_cnn takes only 'coords', got {sorted(unknown)}")
+    return SmallCNN(config.encoder_channels, coords=bool(config.extra.get("coords", False)))
 
 
 # --- trunk ----------------------------------------------------------------------------------
