@@ -121,18 +121,17 @@ class TransformersEncoder(_Normalised):
         self.backbone = getattr(model, "vision_model", model)  # CLIP-style wrappers
         config = self.backbone.config
         self.out_channels = int(getattr(config, "hidden_size", 0) or config.hidden_sizes[-1])
-        self.prefix = None  # found on the first call from the token count
+        self.prefix = 0  # class/register tokens before the patches, set by each call
 
     def forward(self, images: Tensor) -> Tensor:
         output = self.backbone(pixel_values=self.normalise(images))
         hidden = output.last_hidden_state
         if hidden.dim() == 4:  # convolutional backbones: already [N, C, h, w]
             return hidden
-        if self.prefix is None:
-            patch = self.backbone.config.patch_size
-            patch = patch[0] if isinstance(patch, (tuple, list)) else patch
-            grid = (images.shape[-2] // patch) * (images.shape[-1] // patch)
-            self.prefix = hidden.shape[1] - grid
+        patch = self.backbone.config.patch_size
+        patch = patch[0] if isinstance(patch, (tuple, list)) else patch
+        grid = (images.shape[-2] // patch) * (images.shape[-1] // patch)
+        self.prefix = hidden.shape[1] - grid  # from this call's size, never a stale one
         return tokens_to_map(hidden, self.prefix)
 
 
