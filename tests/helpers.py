@@ -19,3 +19,28 @@ def box_grid(nx: int, ny: int, nz: int, spacing: float) -> torch.Tensor:
     axes = [torch.arange(n, dtype=torch.float64) * spacing for n in (nx, ny, nz)]
     grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     return grid - torch.tensor([(nx - 1) * spacing / 2, (ny - 1) * spacing / 2, 0.0])
+
+
+def make_tiny_dataset(folder, **overrides):
+    """A generated dataset in ``folder`` (32 px, 300 Gaussians, 64 anchors, K = 12; no training
+    split unless overridden), made with torch on one thread; returns ``folder``."""
+    from reconphys.data import make_dataset, make_settings
+
+    settings = dict(
+        objects=0,
+        test_objects=1,
+        test_samples_per_object=1,
+        resolution=32,
+        num_gaussians=300,
+        num_anchors=64,
+        num_neighbors=12,
+        seed=0,
+    )
+    settings.update(overrides)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        make_dataset(make_settings(**settings), folder, workers=1, device="cpu")
+    finally:
+        torch.set_num_threads(threads)
+    return folder

@@ -13,10 +13,10 @@ import statistics
 
 import pytest
 import torch
+from helpers import make_tiny_dataset
 from typer.testing import CliRunner
 
 from reconphys.cli import app
-from reconphys.data import make_dataset, make_settings
 from reconphys.eval.evaluate import EvalSettings, evaluate_prediction
 from reconphys.eval.lpips import find_lpips_weights
 from reconphys.eval.methods import METHODS, MethodOptions, Prediction, springgaus
@@ -32,22 +32,7 @@ runner = CliRunner()
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    root = tmp_path_factory.mktemp("eval") / "data"
-    settings = make_settings(
-        objects=0,
-        test_objects=2,
-        test_samples_per_object=1,
-        resolution=32,
-        num_gaussians=300,
-        num_anchors=64,
-        num_neighbors=12,
-        seed=3,
-    )
-    make_dataset(settings, root, workers=1, device="cpu")
-    yield root
-    torch.set_num_threads(threads)
+    return make_tiny_dataset(tmp_path_factory.mktemp("eval") / "data", test_objects=2, seed=3)
 
 
 @pytest.fixture(scope="module")

@@ -49,6 +49,23 @@ def test_anchors_are_evenly_spread():
     assert nearest.min() > 0.3 * nearest.median(), "farthest-point sampling avoids clumps"
 
 
+@pytest.mark.parametrize("num_points, count", [(3000, 256), (257, 257)])
+def test_compiled_farthest_point_sampling_matches_the_reference(num_points, count):
+    from reconphys.physics.anchors import (
+        farthest_point_sampling,
+        farthest_point_sampling_reference,
+        numba,
+    )
+
+    if numba is None:
+        pytest.skip("numba not installed: only the reference runs")
+    points = torch.rand(num_points, 3, generator=torch.Generator().manual_seed(3)).double()
+    points[7] = points[11]  # a duplicate: ties must resolve to the same (first) index
+    fast = farthest_point_sampling(points, count, first=4)
+    reference = farthest_point_sampling_reference(points, count, first=4)
+    assert torch.equal(fast, reference)
+
+
 def test_knn_springs_match_brute_force():
     points = torch.rand(60, 3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
     springs, rest = knn_springs(points, 5)

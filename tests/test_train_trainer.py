@@ -276,3 +276,17 @@ def test_plot_training_draws_the_curves(reference, tmp_path):
     with Image.open(path) as image:
         assert image.size == (60 + 480 * len(plot_training.PANELS), 520)
         assert len(image.getcolors(1 << 16)) > 10
+
+
+def test_all_views_makes_each_view_its_own_video(tmp_path):
+    one = TrainingSamples(tiny(tmp_path).data)
+    four = TrainingSamples(tiny(tmp_path, "data.all_views=true").data)
+    assert len(four) == 4 * len(one)
+    items = [four[i] for i in range(4)]  # sample 0 from views 0..3
+    assert torch.equal(items[0]["frames"], one[0]["frames"])
+    assert torch.equal(items[0]["attributes"], items[3]["attributes"])
+    poses = [item["world_to_cam"][0] for item in items]
+    assert all(not torch.allclose(poses[0], p) for p in poses[1:])
+    assert not torch.equal(items[0]["frames"], items[1]["frames"])
+    assert [four.sample_id(i).split("/")[-1] for i in range(4)] == [f"view{v}" for v in range(4)]
+    assert four.fingerprint() != one.fingerprint()  # a resumed run cannot switch silently

@@ -182,36 +182,49 @@ def make_asset(
 def _simulate_to(
     asset,
     out: Path,
-    frames: int,
+    frames: int | None,
     render_video: bool,
     device,
     resolution,
     view,
     backend,
     save_gaussians: bool,
+    steps: list[dict] | None = None,
 ) -> dict:
+    """Simulate (``steps``: a controller script, run as by ``view --script``; ``frames`` is then
+    the total or None for the script's own length) and write trajectory.npz, the mp4 and the
+    preview strip into ``out`` (and interaction.json for a script)."""
     from .render.video import to_uint8, write_mp4, write_strip
     from .simulate import (
         default_view,
         gaussian_centres,
         render_frames,
         simulate_asset,
+        simulate_script,
         write_trajectory,
     )
 
     started = time.perf_counter()
-    trajectory = simulate_asset(asset, frames, device, progress=True)
+    recording = None
+    if steps is None:
+        trajectory = simulate_asset(asset, frames, device, progress=True)
+    else:
+        trajectory, recording = simulate_script(asset, steps, device, frames)
     sim_seconds = time.perf_counter() - started
-    anchors = trajectory.x[0]  # [T+1, N_A, 3]
+    anchors = trajectory.x[0].to(device)  # [T+1, N_A, 3]
     means = gaussian_centres(asset, anchors) if save_gaussians else None
     out.mkdir(parents=True, exist_ok=True)
     write_trajectory(out / "trajectory.npz", trajectory, means)
     summary = {
-        "frames": frames,
+        "frames": anchors.shape[0] - 1,
         "substeps_used": trajectory.substeps,
         "simulate_seconds": round(sim_seconds, 3),
         "lowest_z_m": float(anchors[..., 2].min()),
     }
+    if recording is not None:
+        from .viewer.recording import write_interaction
+
+        write_interaction(out / "interaction.json", recording)
     if render_video:
         camera = default_view(resolution, resolution, view)
         started = time.perf_counter()
@@ -226,7 +239,12 @@ def _simulate_to(
 @user_errors
 def simulate(
     asset_dir: Path = typer.Argument(..., help="Asset folder (physics.json, anchors.npz, ...)."),
-    frames: int = typer.Option(30, "--frames", help="Frames to simulate (frame_dt each)."),
+    frames: int = typer.Option(
+        None,
+        "--frames",
+        help="Frames to simulate (frame_dt each; default 30). With --script: the total, free "
+        "after the script (default: the script's own length).",
+    ),
     out: Path = typer.Option(..., "--out", help="Output folder for trajectory.npz and the mp4."),
     no_render: bool = typer.Option(False, "--no-render", help="Skip rendering the mp4."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
@@ -234,18 +252,39 @@ def simulate(
     view: int = typer.Option(0, help="Dataset view 0–3 (azimuth 0°, 90°, 180°, 270°)."),
     backend: str = typer.Option("auto", help="Renderer: auto, torch or gsplat."),
     save_gaussians: bool = typer.Option(False, help="Also store Gaussian centres per frame."),
+    script: Path = typer.Option(
+        None, "--script", help="JSON controller script (grab, move, release, ...; docs/viewer.md)."
+    ),
+    push: str = typer.Option(
+        None,
+        "--push",
+        help='"X,Y,Z" metres: at frame N/3 grab the side facing away from the push, move it by '
+        "X,Y,Z over 10 frames, release (docs/viewer.md).",
+    ),
 ):
     """Simulate an asset: writes OUT/trajectory.npz (anchors [T+1, N_A, 3], substeps_used) and,
-    unless --no-render, OUT/simulation.mp4 and OUT/preview.png from a dataset view."""
+    unless --no-render, OUT/simulation.mp4 and OUT/preview.png from a dataset view. --script or
+    --push drive it with the viewer's controller (grips) and add OUT/interaction.json."""
     from .assets.asset import read_asset
     from .simulate import resolve_device
+    from .viewer.script import load_script, parse_vector, push_script
 
-    if frames < 1:
+    if frames is not None and frames < 1:
         raise InputError(f"must be ≥ 1, got {frames}", field="--frames")
     if resolution < 8:
         raise InputError(f"must be ≥ 8 pixels, got {resolution}", field="--resolution")
     if backend not in ("auto", "torch", "gsplat"):
         raise InputError(f"expected auto, torch or gsplat, got {backend!r}", field="--backend")
+    if script is not None and push is not None:
+        raise InputError("give --script or --push, not both", field="--push")
+    steps = None
+    if script is not None:
+        steps = load_script(script)
+    elif push is not None:
+        frames = 30 if frames is None else frames
+        steps = push_script(frames, parse_vector(push, "--push"))
+    elif frames is None:
+        frames = 30
     torch_device = resolve_device(device)
     asset = read_asset(asset_dir)
     try:
@@ -259,6 +298,7 @@ def simulate(
             view,
             backend,
             save_gaussians,
+            steps,
         )
     except InputError as e:
         raise InputError(str(e), source=str(asset_dir)) from None
@@ -281,6 +321,41 @@ def inspect(asset_dir: Path = typer.Argument(..., help="Asset folder.")):
     report["substeps_for_stability"] = bound
     report["substeps_used"] = max(bound, p.substeps)
     typer.echo(json.dumps(report, indent=2))
+
+
+@app.command()
+@user_errors
+def export(
+    asset_dir: Path = typer.Argument(..., help="Asset folder."),
+    fmt: str = typer.Option(
+        ..., "--format", help="newton (.npz for NVIDIA Warp / Newton) or mjcf (MuJoCo XML)."
+    ),
+    out: Path = typer.Option(..., "--out", help="File to write."),
+    overwrite: bool = typer.Option(False, help="Replace an existing file."),
+):
+    """Export an asset to another simulator (docs/export.md): newton writes particles and
+    springs (SI, ke = k/l, kd = d/l per spring) and the Gaussian binding to one .npz; mjcf
+    writes a MuJoCo flex (anchors as vertices, springs as edges) on a ground plane."""
+    from .assets.asset import read_asset
+    from .assets.export import FORMATS, export_asset
+
+    if fmt not in FORMATS:
+        raise InputError(f"expected one of {', '.join(FORMATS)}, got {fmt!r}", field="--format")
+    if out.exists() and not overwrite:
+        raise InputError("already exists (use --overwrite to replace it)", source=str(out))
+    asset = read_asset(asset_dir)
+    path = export_asset(asset, out, fmt)
+    typer.echo(
+        json.dumps(
+            {
+                "format": fmt,
+                "out": str(path),
+                "anchors": asset.num_anchors,
+                "springs": int(asset.springs.shape[0]),
+                "bytes": path.stat().st_size,
+            }
+        )
+    )
 
 
 @app.command()
@@ -464,10 +539,7 @@ def data_export(
     from .data.dataset import DropDataset
 
     dataset = DropDataset(root, allow_incomplete=True, verify=False)
-    ids = [s["id"] for s in dataset.samples]
-    if sample not in ids:
-        raise InputError("no such sample in manifest.json", source=str(root), field=sample)
-    write_asset(dataset.asset(ids.index(sample)), out, overwrite=overwrite)
+    write_asset(dataset.asset(dataset.index_of(sample)), out, overwrite=overwrite)
     typer.echo(f"wrote {out}")
 
 
@@ -646,6 +718,11 @@ def train(
         )
     else:
         typer.echo(f"{result.out} already has {result.step} steps (train.steps); nothing to do")
+
+
+# The user-path commands (predict, data video) live in their own module; importing it registers
+# them on `app` (it imports `app` from here, so this stays below the definitions it needs).
+from . import cli_predict  # noqa: E402, F401
 
 
 def main() -> None:

@@ -50,6 +50,45 @@ def simulate_asset(
     return trajectory
 
 
+def simulate_script(
+    asset: Asset,
+    steps: list[dict],  # a controller script (docs/viewer.md), e.g. from viewer.script.load_script
+    device: torch.device,
+    num_frames: int | None = None,  # total frames; None: as many as the script simulates
+):  # -> tuple[Trajectory, viewer.session.Recording]
+    """Run a controller script headless from the asset's initial state; returns the trajectory
+    (x, v ``[1, T+1, N_A, 3]``, frame 0 = the initial state) and the recording (grip positions).
+
+    The same :class:`~reconphys.viewer.ViewerSession` and
+    :func:`~reconphys.viewer.script.run_script` as ``reconphys view --script``, so grips act
+    through the viewer's controller springs. With ``num_frames``, the object runs free after the
+    script until the trajectory has ``num_frames`` frames; a script that simulates more is an
+    error. Every frame the script publishes counts, including the state a ``drop`` or ``reset``
+    jumps to.
+    """
+    from .viewer.recording import recording_trajectory
+    from .viewer.script import run_script
+    from .viewer.session import ViewerSession
+
+    # As `view --script` (one simulation thread), without real-time pacing or a recording cap.
+    session = ViewerSession(asset, device=device, realtime=False, max_record_frames=2**62)
+    session.start_recording()
+    run_script(session, steps, record=False)
+    recorded = session.status().recording_frames
+    if num_frames is not None:
+        if recorded > num_frames:
+            raise InputError(
+                f"the script simulates {recorded} frames, more than the {num_frames} asked for",
+                field="--frames",
+            )
+        session.advance(num_frames - recorded)
+        recorded = session.status().recording_frames
+        if recorded != num_frames:
+            raise InputError("the simulation became unstable (NaN): raise the substeps")
+    recording = session.stop_recording()
+    return recording_trajectory(recording), recording
+
+
 def gaussian_centres(
     asset: Asset,
     anchors: Tensor,  # [T, N_A, 3] anchor positions per frame, metres

@@ -30,7 +30,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from ..physics import SpringMassModel, State
+from ..physics import SpringMassModel, State, Trajectory
 from .gaussians import Gaussians
 from .ply import read_ply, write_ply
 
@@ -104,6 +104,22 @@ class Asset:
 
     def initial_state(self, device=None, dtype: torch.dtype = torch.float32) -> State:
         return State(self.x0[None].to(device, dtype), self.v0[None].to(device, dtype))
+
+    def simulate(self, frames: int, device: torch.device | str = "cpu") -> Trajectory:
+        """Roll the spring-mass system forward ``frames`` frames from the initial state, exactly
+        as ``reconphys simulate`` does (:func:`reconphys.simulate.simulate_asset`, float32, the
+        asset's substeps raised to the stability bound).
+
+        Returns a :class:`~reconphys.physics.Trajectory`: ``x``, ``v [1, frames+1, N_A, 3]`` (m,
+        m/s; frame 0 is the initial state), ``substeps`` and ``frame_dt`` (s). Raises
+        :class:`~reconphys.errors.InputError` if the result is not finite. On CPU, call
+        ``torch.set_flush_denormal(True)`` first for speed (docs/physics.md).
+        """
+        from ..simulate import simulate_asset  # simulate.py imports this module
+
+        if int(frames) < 1:
+            raise InputError(f"must be ≥ 1, got {frames}", field="frames")
+        return simulate_asset(self, int(frames), torch.device(device))
 
     def total_mass(self) -> float:
         if "mass" in self.per_element:

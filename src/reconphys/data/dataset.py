@@ -164,6 +164,13 @@ class DropDataset(Dataset, _Selection):
     def __len__(self) -> int:
         return len(self.samples)
 
+    def index_of(self, sample_id: str) -> int:
+        """The index of the sample called ``sample_id``; InputError naming the dataset if none."""
+        for index, sample in enumerate(self.samples):
+            if sample["id"] == sample_id:
+                return index
+        raise InputError("no such sample in manifest.json", source=str(self.root), field=sample_id)
+
     def meta(self, index: int) -> dict:
         """The sample's sample.json (attributes, initial state, cameras, contact frame, ...)."""
         return read_sample_meta(self.root, self.samples[index]["id"])

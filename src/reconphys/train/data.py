@@ -83,18 +83,25 @@ def generate_settings(config: DataConfig) -> DataSettings:
 
 class TrainingSamples(Dataset):
     """Items ``{frames [1, T, H, W, 3], K [1, 3, 3], world_to_cam [1, 4, 4], attributes [4],
-    id, asset}`` of one view, frames 0..T−1, at the loss' render resolution."""
+    id, asset}`` of one view, frames 0..T−1, at the loss' render resolution.
+
+    With ``config.all_views`` every view of a sample is its own item (item ``i`` = sample
+    ``i // 4``, view ``i % 4``): four videos of the same drop from four azimuths."""
 
     def __init__(self, config: DataConfig):
         split = None if config.split == "all" else config.split
         frames = range(config.frames)
         resolution = config.loss_resolution
+        self.views = [0, 1, 2, 3] if config.all_views else [config.view]
         if config.source == GENERATE:
             self.settings = generate_settings(config)
             self._check_frames(config)
-            self.dataset = GeneratedDropDataset(
-                self.settings, split, views=[config.view], frames=frames, resolution=resolution
-            )
+            self.per_view = [
+                GeneratedDropDataset(
+                    self.settings, split, views=[v], frames=frames, resolution=resolution
+                )
+                for v in self.views
+            ]
             self.source = GENERATE
         else:
             root = Path(config.source)
@@ -107,10 +114,12 @@ class TrainingSamples(Dataset):
                 )
             self.settings = read_manifest(root)["parsed_settings"]
             self._check_frames(config)
-            self.dataset = DropDataset(
-                root, split, views=[config.view], frames=frames, resolution=resolution
-            )
+            self.per_view = [
+                DropDataset(root, split, views=[v], frames=frames, resolution=resolution)
+                for v in self.views
+            ]
             self.source = str(root.resolve())
+        self.dataset = self.per_view[0]  # samples, assets and attributes (the same in every view)
         if len(self.dataset) == 0:
             raise InputError(f"no samples in split {config.split!r}", field="data.split")
 
@@ -123,15 +132,21 @@ class TrainingSamples(Dataset):
             )
 
     def __len__(self) -> int:
-        return len(self.dataset)
+        return len(self.dataset) * len(self.views)
 
     def sample_id(self, index: int) -> str:
+        index, view = divmod(index, len(self.views))
+        suffix = f"/view{self.views[view]}" if len(self.views) > 1 else ""
+        return self._sample_id(index) + suffix
+
+    def _sample_id(self, index: int) -> str:
         if isinstance(self.dataset, DropDataset):
             return self.dataset.samples[index]["id"]
         return self.dataset.samples[index].id
 
     def asset(self, index: int) -> Asset:
         """The sample's placed object with its true attributes and initial velocity."""
+        index //= len(self.views)
         if isinstance(self.dataset, DropDataset):
             return self.dataset.asset(index)
         planned = self.dataset.samples[index]
@@ -140,13 +155,13 @@ class TrainingSamples(Dataset):
         return sample_asset(obj, spec, place(obj, spec), self.settings)
 
     def __getitem__(self, index: int) -> dict:
-        item = self.dataset[index]
+        item = self.per_view[index % len(self.views)][index // len(self.views)]
         return {
             "frames": item["frames"],
             "K": item["K"],
             "world_to_cam": item["world_to_cam"],
             "attributes": item["attributes"],
-            "id": item["id"],
+            "id": self.sample_id(index),
             "asset": self.asset(index),
         }
 

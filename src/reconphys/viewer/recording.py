@@ -24,6 +24,31 @@ from .session import Recording
 RENDER_CHUNK = 16  # frames rendered at a time (bounds the float image memory)
 
 
+def recording_trajectory(recording: Recording) -> Trajectory:
+    """The recording as a batch-of-one :class:`~reconphys.physics.Trajectory` (x, v
+    ``[1, T+1, N_A, 3]``; ``substeps`` the most any frame used)."""
+    return Trajectory(
+        x=recording.anchors[None],
+        v=recording.velocities[None],
+        substeps=max(recording.substeps),
+        frame_dt=recording.frame_dt,
+    )
+
+
+def write_interaction(path: str | os.PathLike, recording: Recording) -> Path:
+    """``interaction.json``: frames, frame_dt, substeps per frame and the grip positions
+    (metres) of every frame."""
+    info = {
+        "frames": recording.anchors.shape[0] - 1,
+        "frame_dt": recording.frame_dt,
+        "substeps_per_frame": recording.substeps,
+        "grip_positions_m": recording.grip_positions,
+    }
+    path = Path(path)
+    path.write_text(json.dumps(info) + "\n")
+    return path
+
+
 def write_recording(
     asset: Asset,
     recording: Recording,
@@ -39,21 +64,9 @@ def write_recording(
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     anchors = recording.anchors  # [T+1, N_A, 3]
-    trajectory = Trajectory(
-        x=anchors[None],
-        v=recording.velocities[None],
-        substeps=max(recording.substeps),
-        frame_dt=recording.frame_dt,
-    )
+    trajectory = recording_trajectory(recording)
     paths = {"trajectory": write_trajectory(folder / "trajectory.npz", trajectory)}
-    info = {
-        "frames": anchors.shape[0] - 1,
-        "frame_dt": recording.frame_dt,
-        "substeps_per_frame": recording.substeps,
-        "grip_positions_m": recording.grip_positions,
-    }
-    paths["interaction"] = folder / "interaction.json"
-    paths["interaction"].write_text(json.dumps(info) + "\n")
+    paths["interaction"] = write_interaction(folder / "interaction.json", recording)
     if render_video:
         camera = camera or default_view(resolution, resolution, 0)
         device = torch.device(device)

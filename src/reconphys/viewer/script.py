@@ -17,12 +17,16 @@ JSON list; each entry is an object with one action::
 
 ``move`` changes the grip's goal linearly over ``frames`` frames (simulating them); without
 ``frames`` it only sets the goal. Positions are metres in the world frame (z up).
+
+:func:`push_script` writes the script that ``reconphys simulate --push X,Y,Z`` runs.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
@@ -33,6 +37,7 @@ from .session import Recording, ViewerSession
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0)}
 AXES["-z"] = (2, -1.0)
 ACTIONS = ("run", "drop", "set", "grab", "move", "release", "reset")
+PUSH_MOVE_FRAMES = 10  # frames over which `simulate --push` moves its grip
 
 
 def load_script(path: str | os.PathLike) -> list[dict]:
@@ -145,3 +150,51 @@ def _move(session: ViewerSession, value, where: str) -> None:
     for frame in range(1, frames + 1):
         session.move_grip(name, start + (goal - start) * (frame / frames))
         session.advance(1)
+
+
+def parse_vector(text: str, where: str) -> tuple[float, float, float]:
+    """``"X,Y,Z"`` (three finite numbers, metres) → a tuple; InputError naming ``where``."""
+    try:
+        values = tuple(float(part) for part in str(text).split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise InputError(f'expected "X,Y,Z" (three numbers, metres), got {text!r}', field=where)
+    return values
+
+
+def push_script(
+    frames: int,  # total frames of the clip
+    displacement: Sequence[float],  # [3] metres the grip moves, world frame
+    move_frames: int = PUSH_MOVE_FRAMES,
+) -> list[dict]:
+    """The script of ``reconphys simulate --push``: a push by ``displacement`` at a third of the
+    clip.
+
+    Runs free to frame ``frames // 3``; grabs the object at its extreme point on the side facing
+    away from the push (along the dominant axis of the displacement: a push along +x grabs the
+    −x side, like a hand pushing from behind); moves that grip by ``displacement`` over
+    ``move_frames`` frames (fewer when the clip ends sooner); releases it; runs free to frame
+    ``frames``. The grip holds the viewer's default G = 16 anchors and its controller follows at
+    most 1.5 m/s (docs/viewer.md), so over 10 frames (0.3 s) a displacement beyond 0.45 m is not
+    reached before the release. Writing this list to a JSON file and running ``--script`` gives
+    the same trajectory.
+    """
+    vector = [float(v) for v in displacement]
+    if len(vector) != 3 or not all(math.isfinite(v) for v in vector):
+        raise InputError(f"expected [x, y, z] in metres, got {displacement!r}", field="--push")
+    if not any(vector):
+        raise InputError("the push must not be zero", field="--push")
+    if frames < 1:
+        raise InputError(f"must be ≥ 1, got {frames}", field="--frames")
+    axis = max(range(3), key=lambda i: abs(vector[i]))
+    side = ("-" if vector[axis] > 0 else "+") + "xyz"[axis]
+    start = frames // 3
+    move = max(1, min(int(move_frames), frames - start))
+    return [
+        {"run": start},
+        {"grab": {"name": "push", "at": side}},
+        {"move": {"grip": "push", "by": vector, "frames": move}},
+        {"release": "push"},
+        {"run": frames - start - move},
+    ]

@@ -1,0 +1,223 @@
+"""Where the object is: given Gaussians placed on the first frame's mask, its initial velocity
+and the ground, from the camera and the masks alone (no optimisation through the renderer).
+
+- :func:`projected_box` / :func:`mask_box`: pixel bounding boxes (robust: 1st–99th percentile).
+- :func:`fit_to_mask`: keep the Gaussians' orientation and size, move them so their rendered
+  silhouette covers the first frame's mask box (depth from the apparent size, then the ray
+  through the box centre); :func:`silhouette_iou` says how well a placement matches.
+- :func:`estimate_linear_velocity`: the free-fall motion of the mask centroid over the first
+  frames (before any contact) → a linear velocity in m/s by least squares; the angular velocity is
+  not estimated (0). The component along the viewing direction is weakly observed (it only
+  changes the apparent size) and is damped towards 0 by a small ridge term.
+- :func:`estimate_ground_height`: the world z of the landed silhouette's bottom (last frame)
+  near the object's position — a rough check on the camera's ground.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from ..assets.gaussians import Gaussians
+from .camera import CameraSpec
+
+GRAVITY = 9.8  # m/s², along −z (DESIGN §3)
+
+
+def project(points: Tensor, camera: CameraSpec) -> tuple[Tensor, Tensor]:
+    """World points [N, 3] → (pixels [N, 2] (u right, v down), depth [N] metres)."""
+    w2c = camera.world_to_cam.to(points)
+    cam = points @ w2c[:3, :3].T + w2c[:3, 3]
+    depth = cam[:, 2]
+    uv = cam[:, :2] / depth.clamp_min(1e-6)[:, None]
+    K = camera.K.to(points)
+    return uv * torch.stack([K[0, 0], K[1, 1]]) + torch.stack([K[0, 2], K[1, 2]]), depth
+
+
+def ray(pixel: Tensor, camera: CameraSpec) -> tuple[Tensor, Tensor]:
+    """Pixel [2] → (camera centre [3], unit direction [3]) in the world frame."""
+    K = camera.K.double()
+    w2c = camera.world_to_cam.double()
+    direction_cam = torch.stack(
+        [
+            (pixel[0] - K[0, 2]) / K[0, 0],
+            (pixel[1] - K[1, 2]) / K[1, 1],
+            torch.tensor(1.0, dtype=torch.float64),
+        ]
+    )
+    rotation = w2c[:3, :3]
+    centre = -rotation.T @ w2c[:3, 3]
+    direction = rotation.T @ direction_cam
+    return centre, direction / direction.norm()
+
+
+def _box(u: Tensor, v: Tensor) -> Tensor:
+    q = torch.tensor([0.01, 0.99], dtype=u.dtype)
+    return torch.cat([torch.quantile(u, q), torch.quantile(v, q)])  # [u0, u1, v0, v1]
+
+
+def projected_box(means: Tensor, camera: CameraSpec) -> Tensor:
+    """[4] (u_min, u_max, v_min, v_max) of the projected centres (1st–99th percentile)."""
+    uv, _ = project(means.double(), camera)
+    return _box(uv[:, 0], uv[:, 1])
+
+
+def mask_box(mask: Tensor) -> Tensor:
+    """[4] (u_min, u_max, v_min, v_max) of a [H, W] mask's pixels (centres at +0.5)."""
+    v, u = torch.nonzero(mask > 0.5, as_tuple=True)
+    return _box(u.double() + 0.5, v.double() + 0.5)
+
+
+def box_iou(a: Tensor, b: Tensor) -> float:
+    width = (torch.minimum(a[1], b[1]) - torch.maximum(a[0], b[0])).clamp_min(0)
+    height = (torch.minimum(a[3], b[3]) - torch.maximum(a[2], b[2])).clamp_min(0)
+    inter = float(width * height)
+    area = float((a[1] - a[0]) * (a[3] - a[2]) + (b[1] - b[0]) * (b[3] - b[2])) - inter
+    return inter / area if area > 0 else 0.0
+
+
+def silhouette_iou(
+    gaussians: Gaussians,
+    mask: Tensor,  # [H, W]
+    camera: CameraSpec,
+    max_size: int = 64,  # rendered at most this many pixels on the long side
+) -> float:
+    """IoU of the rendered silhouette (alpha > 0.5) and the mask, at a reduced size."""
+    import torch.nn.functional as F
+
+    small = _reduced(camera, max_size)
+    alpha = rendered_mask(gaussians, small) > 0.5
+    target = (
+        F.interpolate(mask[None, None].float(), size=(small.height, small.width), mode="area")[0, 0]
+        > 0.5
+    )
+    union = float((alpha | target).sum())
+    return float((alpha & target).sum()) / union if union > 0 else 0.0
+
+
+def _reduced(camera: CameraSpec, max_size: int) -> CameraSpec:
+    scale = min(1.0, max_size / max(camera.width, camera.height))
+    return camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
+
+
+def rendered_mask(gaussians: Gaussians, camera: CameraSpec) -> Tensor:  # [H, W] alpha > 0.5
+    from ..render import render
+
+    with torch.no_grad():
+        alpha = render(gaussians.map(lambda t: t.float()), camera.cameras(), backend="torch").alpha
+    return (alpha.reshape(camera.height, camera.width) > 0.5).float()
+
+
+def fit_to_mask(
+    gaussians: Gaussians,  # world-frame orientation and size kept
+    mask: Tensor,  # [H, W] the first frame's object mask
+    camera: CameraSpec,
+    iterations: int = 8,
+    max_size: int = 64,  # silhouettes are rendered at most this many pixels on the long side
+) -> Gaussians:
+    """Translate the Gaussians so that their rendered silhouette's box matches the mask's box
+    (same orientation and size; the depth follows from the apparent size). An empty or
+    off-screen silhouette returns the Gaussians unchanged."""
+    import torch.nn.functional as F
+
+    small = _reduced(camera, max_size)
+    target_mask = F.interpolate(
+        mask[None, None].float(), size=(small.height, small.width), mode="area"
+    )[0, 0]
+    if float((target_mask > 0.5).sum()) == 0:
+        return gaussians
+    target = mask_box(target_mask)
+    target_centre = torch.stack([(target[0] + target[1]) / 2, (target[2] + target[3]) / 2])
+    target_size = torch.sqrt((target[1] - target[0]) * (target[3] - target[2])).clamp_min(1.0)
+    means = gaussians.means.double()
+    centre = means.mean(0)
+    eye, _ = ray(target_centre, small)
+    depth = float((centre - eye).norm())
+    position, aim = centre, target_centre.clone()
+    for _ in range(iterations):
+        origin, direction = ray(aim, small)
+        candidate = origin + direction * depth
+        placed = gaussians.with_means((means - centre + candidate).to(gaussians.means))
+        silhouette = rendered_mask(placed, small)
+        if float(silhouette.sum()) == 0:
+            break
+        position = candidate
+        box = mask_box(silhouette)
+        size = torch.sqrt((box[1] - box[0]) * (box[3] - box[2])).clamp_min(1.0)
+        box_centre = torch.stack([(box[0] + box[1]) / 2, (box[2] + box[3]) / 2])
+        depth = depth * float(size / target_size)
+        aim = aim + (target_centre - box_centre)  # move the box centre onto the mask's
+    shift = (position - centre).to(gaussians.means)
+    return gaussians.with_means(gaussians.means + shift)
+
+
+def _centroid(mask: Tensor) -> Tensor:
+    v, u = torch.nonzero(mask > 0.5, as_tuple=True)
+    return torch.stack([u.double().mean() + 0.5, v.double().mean() + 0.5])
+
+
+def estimate_linear_velocity(
+    means: Tensor,  # [N, 3] the object at frame 0, world frame
+    masks: Tensor,  # [T, H, W]
+    camera: CameraSpec,
+    frame_dt: float,
+    frames: int = 4,  # frames 0..frames−1 are used (before contact for the dataset's drops)
+    ridge: float = 1e-2,  # pixels² per (m/s)²: keeps the weakly observed depth component small
+) -> Tensor:  # [3] m/s
+    """Linear velocity whose ballistic motion moves the projected centroid like the masks'."""
+    used = [t for t in range(min(frames, masks.shape[0])) if float(masks[t].sum()) > 0]
+    if len(used) < 2:
+        return torch.zeros(3)
+    points = means.double()
+    observed = torch.stack([_centroid(masks[t]) for t in used])  # [F, 2]
+    times = torch.tensor([t * frame_dt for t in used], dtype=torch.float64)
+    offset = observed[0] - project(points.mean(0, keepdim=True), camera)[0][0]
+    fall = torch.zeros(len(used), 3, dtype=torch.float64)
+    fall[:, 2] = -0.5 * GRAVITY * times**2
+
+    def residual(velocity: Tensor) -> Tensor:
+        centres = points.mean(0) + times[:, None] * velocity + fall  # [F, 3]
+        uv, _ = project(centres, camera)
+        return torch.cat([(uv + offset - observed).reshape(-1), ridge**0.5 * velocity])
+
+    velocity = torch.zeros(3, dtype=torch.float64)
+    for _ in range(10):  # Gauss–Newton (the model is nearly linear in v over a few frames)
+        J = torch.autograd.functional.jacobian(residual, velocity)
+        r = residual(velocity)
+        step = torch.linalg.lstsq(J, -r[:, None]).solution[:, 0]
+        velocity = velocity + step
+        if float(step.norm()) < 1e-6:
+            break
+    return velocity.float()
+
+
+def estimate_ground_height(
+    means: Tensor,  # [N, 3] the object at frame 0 (its x, y locate it), world frame
+    mask: Tensor,  # [H, W] a frame after landing (the last one)
+    camera: CameraSpec,
+) -> float | None:
+    """World z where the ray through the landed silhouette's bottom (last frame) meets a vertical
+    plane facing the camera at the object's position, moved half its horizontal radius towards
+    the camera (the lowest visible point of a resting object is on its near side). A rough check
+    of the camera's ground: ± (radius / 2) · tan(elevation) plus a pixel's depth. None for an
+    empty mask or a camera looking straight down."""
+    if float(mask.sum()) == 0:
+        return None
+    v, u = torch.nonzero(mask > 0.5, as_tuple=True)
+    lowest = float(torch.quantile(v.double(), 0.99)) + 1.0  # bottom edge of the lowest rows
+    columns = u[v.double() >= lowest - 2.0]
+    pixel = torch.tensor([float(columns.double().mean()) + 0.5, lowest], dtype=torch.float64)
+    origin, direction = ray(pixel, camera)
+    points = means.double()
+    centre = points.mean(0)
+    normal = torch.tensor([origin[0] - centre[0], origin[1] - centre[1], 0.0], dtype=torch.float64)
+    if float(normal.norm()) < 1e-9:
+        return None
+    normal = normal / normal.norm()
+    radius = float((points[:, :2] - centre[:2]).norm(dim=1).max())
+    anchor = centre + normal * (0.5 * radius)
+    denominator = float(direction @ normal)
+    if abs(denominator) < 1e-9:
+        return None
+    distance = float((anchor - origin) @ normal) / denominator
+    return float((origin + distance * direction)[2])

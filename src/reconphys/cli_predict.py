@@ -1,0 +1,135 @@
+"""Commands of the user's path: ``reconphys predict`` and ``reconphys data video`` (docs/usage.md).
+
+Registered on the main app when :mod:`reconphys.cli` is imported.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import typer
+
+from .cli import app, data_app, user_errors
+from .errors import InputError
+
+TIMING_ORDER = (
+    "model_load", "decode", "gaussians", "physics_network", "asset_build", "refine", "write",
+    "preview",
+)  # fmt: skip
+
+
+@app.command("predict")
+@user_errors
+def predict_command(
+    input: Path = typer.Argument(
+        ..., help="Video file (mp4/mov/gif/...), folder of frames, or a dataset folder (--sample)."
+    ),
+    out: Path = typer.Option(..., "--out", help="Asset folder to write (DESIGN §6 + preview)."),
+    gaussians: Path = typer.Option(
+        None, help="Gaussian PLY of the object (needed for videos and frame folders)."
+    ),
+    masks: Path = typer.Option(None, help="Folder of object masks, one image per frame."),
+    background: Path = typer.Option(None, help="Clean plate image for background subtraction."),
+    camera: Path = typer.Option(None, help="Camera JSON (K, world_to_cam, ground_height)."),
+    fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
+    sample: str = typer.Option(None, help="Dataset input: the sample id."),
+    view: int = typer.Option(None, help="Dataset input: the view (default: the model's)."),
+    model: Path = typer.Option(None, help="Physics predictor (default: the shipped model)."),
+    placement: str = typer.Option("auto", help="Given PLY: auto, as-is or fit (to frame 0)."),
+    anchors: int = typer.Option(None, help="Anchors N_A (default: the model's training data)."),
+    refine: int = typer.Option(0, "--refine", help="Test-time refinement steps (0: none)."),
+    refine_resolution: int = typer.Option(64, help="Render size of the refinement, pixels."),
+    preview_frames: int = typer.Option(60, help="Frames in preview.mp4 (0: no preview)."),
+    device: str = typer.Option("auto", help="auto, cpu or cuda."),
+    overwrite: bool = typer.Option(False, help="Replace an existing OUT."),
+):
+    """Predict a simulation-ready asset from one recording of a dropped object: OUT gets the
+    asset (gaussians.ply, anchors.npz, binding.npz, physics.json), preview.mp4/.png (observed |
+    simulated) and prediction.json (attributes, timings, how each input was read)."""
+    from .pipeline.predict import predict, write_outputs
+    from .simulate import resolve_device
+
+    if out.exists() and not overwrite:
+        raise InputError("already exists (use --overwrite to replace it)", source=str(out))
+    if fps is not None and not (math.isfinite(fps) and fps > 0):
+        raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
+    if anchors is not None and anchors < 4:
+        raise InputError(f"must be ≥ 4, got {anchors}", field="--anchors")
+    if preview_frames < 0:
+        raise InputError(f"must be ≥ 0, got {preview_frames}", field="--preview-frames")
+    torch_device = resolve_device(device)
+    result = predict(
+        input, gaussians=gaussians, masks=masks, background=background, camera=camera, fps=fps,
+        sample=sample, view=view, model=model, placement=placement, num_anchors=anchors,
+        refine_steps=refine, refine_resolution=refine_resolution, device=torch_device,
+        progress=True,
+    )  # fmt: skip
+    summary = write_outputs(result, out, overwrite, preview_frames, torch_device)
+    attributes = summary["attributes"]
+    typer.echo(
+        f"wrote {out}: mass {attributes['mass']:.3g} kg/anchor, stiffness "
+        f"{attributes['stiffness']:.4g}, damping {attributes['damping']:.3g}, friction "
+        f"{attributes['friction']:.2f} ({summary['anchors']} anchors, {summary['gaussians']} "
+        f"Gaussians; geometry: {summary['geometry']})"
+    )
+    if "refine" in summary:
+        r = summary["refine"]
+        typer.echo(
+            f"refine: {r['steps']} steps in {r['seconds']} s, photometric loss "
+            f"{r['loss_initial']:.3g} → {r['loss_best']:.3g} (best at step {r['best_step']})"
+        )
+    timings = summary["timings_s"]
+    parts = [f"{k} {timings[k]:.3f}" for k in TIMING_ORDER if k in timings]
+    typer.echo("seconds: " + ", ".join(parts))
+
+
+@data_app.command("video")
+@user_errors
+def data_video(
+    root: Path = typer.Argument(..., help="Dataset folder."),
+    sample: str = typer.Argument(..., help="Sample id (see manifest.json)."),
+    out: Path = typer.Argument(..., help="Folder to write video.mp4, camera.json, gaussians.ply."),
+    view: int = typer.Option(0, help="View 0–3."),
+    overwrite: bool = typer.Option(False, help="Replace an existing folder."),
+):
+    """Write one sample as a user would bring it to `reconphys predict`: its encoded video
+    (view_V.mp4), the camera file and the object's Gaussians placed as in frame 0."""
+    import tempfile
+
+    from .assets.ply import write_ply
+    from .capture import CameraSpec, write_camera
+    from .data.dataset import DropDataset
+    from .data.storage import video_name
+
+    if not 0 <= view < 4:
+        raise InputError(f"expected 0–3, got {view}", field="--view")
+    if out.exists() and not overwrite:
+        raise InputError("already exists (use --overwrite to replace it)", source=str(out))
+    dataset = DropDataset(root, views=[view], allow_incomplete=True, verify=False)
+    index = dataset.index_of(sample)
+    meta = dataset.samples[index]
+    video = root / meta["dir"] / video_name(view)
+    if not video.is_file():
+        raise InputError("the sample's video is missing", source=str(video))
+    item = dataset[index]
+    height, width = item["frames"].shape[2:4]
+    camera = CameraSpec(item["K"][0].double(), item["world_to_cam"][0].double(), width, height)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        shutil.copyfile(video, staging / "video.mp4")
+        write_camera(staging / "camera.json", camera)
+        write_ply(staging / "gaussians.ply", dataset.asset(index).gaussians)
+        (staging / "truth.json").write_text(
+            json.dumps({"sample": sample, "view": view, **meta["attributes"]}, indent=1) + "\n"
+        )
+        if out.exists():
+            shutil.rmtree(out)
+        staging.replace(out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    typer.echo(f"wrote {out}: video.mp4, camera.json, gaussians.ply, truth.json")

@@ -1,0 +1,59 @@
+"""The preview: the observed frames beside the simulated asset, from the recording's camera.
+
+Left: the masked recording (black after its last frame). Right: the asset simulated from its
+initial state and rendered into the same camera, continuing past the recording. Panels are
+enlarged (nearest neighbour) to at least ``PREVIEW_MIN_SIZE`` pixels so small inputs stay visible.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from ..assets.asset import Asset
+from ..capture import Observation
+from ..render import Cameras
+from .settings import PREVIEW_MIN_SIZE
+
+SEPARATOR = 2  # pixels of grey between the panels
+
+
+def _enlarge(images: Tensor, factor: int) -> Tensor:  # [T, H, W, 3] → [T, fH, fW, 3]
+    if factor == 1:
+        return images
+    return F.interpolate(images.permute(0, 3, 1, 2), scale_factor=factor, mode="nearest").permute(
+        0, 2, 3, 1
+    )
+
+
+def simulate_and_render(
+    asset: Asset, observation: Observation, num_frames: int, device="cpu", backend="auto"
+) -> Tensor:  # [num_frames, H, W, 3] frames 0..num_frames−1 in the recording's camera
+    from ..simulate import render_frames, simulate_asset
+
+    trajectory = simulate_asset(asset, num_frames - 1, torch.device(device))
+    camera = observation.camera
+    cameras = Cameras(
+        camera.K[None].float(), camera.world_to_cam[None].float(), camera.width, camera.height
+    )
+    return render_frames(asset, trajectory.x[0], cameras, backend).cpu()
+
+
+def side_by_side(
+    observed: Tensor,  # [T_obs, H, W, 3]
+    simulated: Tensor,  # [T, H, W, 3], T ≥ T_obs
+) -> np.ndarray:  # [T, H', 2W' + SEPARATOR, 3] uint8
+    from ..render.video import to_uint8
+
+    num_frames, height, width = simulated.shape[:3]
+    left = torch.zeros_like(simulated)
+    shown = min(observed.shape[0], num_frames)
+    left[:shown] = observed[:shown]
+    factor = max(1, math.ceil(PREVIEW_MIN_SIZE / max(height, width)))
+    left, right = _enlarge(left, factor), _enlarge(simulated, factor)
+    bar = torch.full((num_frames, left.shape[1], SEPARATOR, 3), 0.5)
+    return to_uint8(torch.cat([left, bar, right], dim=2))

@@ -1,0 +1,280 @@
+"""``reconphys predict``: recording → asset, through the documented video path.
+
+A tiny dataset (1 test object, 32 px, 300 Gaussians, 64 anchors) is made once per module; its
+sample is exported with ``data video`` (the encoded mp4, the camera file, the frame-0 Gaussians)
+and predicted from there, and compared with the prediction from the stored frames.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import imageio.v2 as imageio
+import numpy as np
+import pytest
+import torch
+from helpers import make_tiny_dataset
+from typer.testing import CliRunner
+
+from reconphys.capture import default_camera, load_observation
+from reconphys.capture.placement import estimate_linear_velocity, fit_to_mask
+from reconphys.capture.video import resample_indices
+from reconphys.cli import app
+from reconphys.models.physics_predictor import resize_frames
+from reconphys.pipeline.model_input import predictor_frames
+from reconphys.render import Cameras, render
+from reconphys.render.cameras import dataset_views, intrinsics_from_fov
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    return make_tiny_dataset(tmp_path_factory.mktemp("predict") / "data", seed=5)
+
+
+@pytest.fixture(scope="module")
+def sample_id(dataset):
+    return json.loads((dataset / "manifest.json").read_text())["samples"][0]["id"]
+
+
+@pytest.fixture(scope="module")
+def bundle(dataset, sample_id, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bundle") / "b"
+    result = runner.invoke(app, ["data", "video", str(dataset), sample_id, str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def _predict(args, tmp_path, name="asset"):
+    out = tmp_path / name
+    result = runner.invoke(app, ["predict", *map(str, args), "--out", str(out)])
+    return result, out
+
+
+def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
+    dataset, sample_id, bundle, tmp_path
+):
+    result, out = _predict(
+        [
+            bundle / "video.mp4",
+            "--camera",
+            bundle / "camera.json",
+            "--gaussians",
+            bundle / "gaussians.ply",
+            "--preview-frames",
+            "8",
+        ],
+        tmp_path,
+    )
+    assert result.exit_code == 0, result.output
+    for name in (
+        "gaussians.ply",
+        "anchors.npz",
+        "binding.npz",
+        "physics.json",
+        "preview.mp4",
+        "preview.png",
+        "prediction.json",
+    ):
+        assert (out / name).is_file(), name
+    summary = json.loads((out / "prediction.json").read_text())
+    assert summary["placement"] == "as-is" and summary["silhouette_iou_given"] > 0.5
+    for step in ("decode", "gaussians", "physics_network", "asset_build", "write", "preview"):
+        assert summary["timings_s"][step] >= 0
+    preview = imageio.mimread(out / "preview.mp4")
+    assert len(preview) == 30  # at least the observed frames
+    assert preview[0].shape[1] > 2 * preview[0].shape[0]  # observed | simulated side by side
+
+    stored, stored_out = _predict(
+        [dataset, "--sample", sample_id, "--preview-frames", "0"], tmp_path, "stored"
+    )
+    assert stored.exit_code == 0, stored.output
+    reference = json.loads((stored_out / "prediction.json").read_text())
+    assert reference["geometry"].startswith("ground truth")
+    a, b = summary["attributes"], reference["attributes"]
+    # H.264 at 32 px changes the input a little: the prediction may move, not jump
+    assert abs(math.log(a["stiffness"] / a["mass"]) - math.log(b["stiffness"] / b["mass"])) < 0.5
+    assert abs(a["friction"] - b["friction"]) < 0.2
+    physics = json.loads((out / "physics.json").read_text())
+    assert physics["stiffness"] == pytest.approx(a["stiffness"], rel=1e-6)
+
+
+def test_python_api_returns_the_asset(dataset, sample_id):
+    import reconphys
+
+    result = reconphys.predict(dataset, sample=sample_id)
+    assert result.asset.num_anchors == 64
+    assert set(result.timings) >= {"decode", "physics_network", "asset_build"}
+    trajectory = result.asset.simulate(3)
+    assert trajectory.x.shape[-2:] == (64, 3) and bool(torch.isfinite(trajectory.x).all())
+
+
+def test_resampling_picks_the_nearest_frames():
+    assert resample_indices(30, 1 / 0.03, 0.03).tolist() == list(range(30))
+    assert resample_indices(59, 2 / 0.03, 0.03).tolist() == list(range(0, 59, 2))
+    picks = resample_indices(100, 60.0, 0.03)  # 0.03 s = 1.8 recorded frames
+    assert picks[:4].tolist() == [0, 2, 4, 5] and len(picks) == 56  # 99/60 s / 0.03 s + 1
+
+
+def test_a_double_rate_video_is_resampled_to_frame_dt(bundle, tmp_path):
+    frames = imageio.mimread(bundle / "video.mp4")
+    doubled = tmp_path / "double.mp4"
+    imageio.mimwrite(
+        doubled,
+        [f for f in frames for _ in (0, 1)],
+        fps=2 / 0.03,
+        codec="libx264",
+        quality=10,
+        macro_block_size=1,
+    )
+    original = load_observation(bundle / "video.mp4", camera=bundle / "camera.json")
+    resampled = load_observation(doubled, camera=bundle / "camera.json")
+    assert resampled.num_frames == original.num_frames
+    assert (resampled.frames - original.frames).abs().mean() < 0.02
+
+
+def test_predictor_input_warps_other_intrinsics_to_the_dataset_camera(dataset, sample_id):
+    from reconphys.data.dataset import DropDataset
+
+    data = DropDataset(dataset)
+    gaussians = data.asset(0).gaussians
+    views = dataset_views(32, 32)
+    direct = render(gaussians, Cameras(views.K[:1], views.world_to_cam[:1], 32, 32)).rgb[0]
+    # the same pose filmed at 64×48 with a 60° lens and an off-centre principal point
+    K = intrinsics_from_fov(60.0, 64, 48)
+    K[0, 2] += 3.0
+    wide = render(gaussians, Cameras(K[None], views.world_to_cam[:1], 64, 48)).rgb[0]
+    warped = predictor_frames(wide[None], K, 32)[0, 0]
+    assert float((warped - direct).abs().mean()) < 0.02
+    same = predictor_frames(direct[None], views.K[0], 32)
+    assert torch.equal(same, resize_frames(direct[None, None], 32))
+
+
+def test_fit_to_mask_recovers_a_displaced_object(dataset):
+    from reconphys.data.dataset import DropDataset
+
+    data = DropDataset(dataset)
+    gaussians = data.asset(0).gaussians
+    camera = default_camera(64, 64)
+    mask = (render(gaussians, camera.cameras()).alpha.reshape(64, 64) > 0.5).float()
+    moved = gaussians.with_means(gaussians.means + torch.tensor([0.3, -0.2, 0.25]))
+    fitted = fit_to_mask(moved, mask, camera)
+    error = fitted.means.mean(0) - gaussians.means.mean(0)  # metres; view 0 looks along −x
+    # across the view: a fraction of a pixel (~3 cm at 2 m and 64 px); along it (depth from the
+    # apparent size, one pixel of a ~28-px box is ~3.5 % of 2 m): a few pixels' worth
+    assert abs(float(error[1])) < 0.03 and abs(float(error[2])) < 0.03
+    assert abs(float(error[0])) < 0.15
+
+
+def test_linear_velocity_from_a_rendered_free_fall(dataset):
+    from reconphys.data.dataset import DropDataset
+
+    data = DropDataset(dataset)
+    gaussians = data.asset(0).gaussians  # in view at frame 0, as in the dataset
+    camera = default_camera(96, 96)
+    velocity = torch.tensor([0.0, 0.3, 0.8])  # view 0 looks along −x: y is lateral, z vertical
+    masks = []
+    for t in range(4):
+        time = 0.03 * t
+        shift = velocity * time + torch.tensor([0.0, 0.0, -4.9 * time**2])
+        g = gaussians.with_means(gaussians.means + shift)
+        masks.append((render(g, camera.cameras()).alpha.reshape(96, 96) > 0.5).float())
+    estimate = estimate_linear_velocity(gaussians.means, torch.stack(masks), camera, 0.03)
+    assert abs(float(estimate[1]) - 0.3) < 0.1 and abs(float(estimate[2]) - 0.8) < 0.15
+
+
+def test_refine_lowers_the_photometric_loss(dataset, sample_id):
+    from dataclasses import replace
+
+    from reconphys.pipeline.refine import refine
+
+    observation = load_observation(dataset, sample=sample_id)
+    truth = observation.sample["asset"]
+    wrong = replace(truth, physics=replace(truth.physics, stiffness=truth.physics.stiffness / 8))
+    refined, history = refine(wrong, observation, steps=3, resolution=32, num_frames=20)
+    assert history["loss_best"] < history["loss_initial"]
+    assert refined.physics.stiffness > wrong.physics.stiffness  # moved towards the truth
+
+
+# --- bad input: one line, exit 2, no OUT ------------------------------------------------------
+
+
+def _fails(args, tmp_path, expected):
+    result, out = _predict(args, tmp_path)
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith("error: ") and expected in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".asset")]  # no staging left
+
+
+def test_unreadable_video(bundle, tmp_path):
+    bad = tmp_path / "broken.mp4"
+    bad.write_bytes(b"\x00\x01 not a video" * 50)
+    _fails([bad, "--gaussians", bundle / "gaussians.ply"], tmp_path, "cannot decode the video")
+
+
+def test_zero_frames(bundle, tmp_path):
+    empty = tmp_path / "frames"
+    empty.mkdir()
+    _fails([empty, "--gaussians", bundle / "gaussians.ply"], tmp_path, "no frames")
+
+
+def _frame_folder(bundle, tmp_path):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for t, frame in enumerate(imageio.mimread(bundle / "video.mp4")):
+        imageio.imwrite(folder / f"frame_{t}.png", frame)
+    return folder
+
+
+def test_mismatched_mask_count(bundle, tmp_path):
+    frames = _frame_folder(bundle, tmp_path)
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for t in range(5):
+        imageio.imwrite(masks / f"{t}.png", np.full((32, 32), 255, np.uint8))
+    _fails(
+        [frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply"],
+        tmp_path,
+        "5 mask images for 30 frames",
+    )
+
+
+def test_empty_mask(bundle, tmp_path):
+    frames = _frame_folder(bundle, tmp_path)
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for t in range(30):
+        imageio.imwrite(masks / f"{t:03d}.png", np.zeros((32, 32), np.uint8))
+    _fails(
+        [frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply"],
+        tmp_path,
+        "mask is empty in frame 0",
+    )
+
+
+@pytest.mark.parametrize(
+    "change, expected",
+    [
+        ({"K": [[40, 0, 16], [0, 40, 16]]}, "[K]: expected shape [3, 3]"),
+        ({"world_to_cam": [[1, 0, 0, 0]] * 4}, "[world_to_cam]: its 3×3 block is not a rotation"),
+        ({"width": -3}, "[width]: expected a positive integer"),
+    ],
+)
+def test_camera_file_with_wrong_shapes(bundle, tmp_path, change, expected):
+    camera = json.loads((bundle / "camera.json").read_text())
+    camera.update(change)
+    path = tmp_path / "cam.json"
+    path.write_text(json.dumps(camera))
+    _fails(
+        [bundle / "video.mp4", "--camera", path, "--gaussians", bundle / "gaussians.ply"],
+        tmp_path,
+        expected,
+    )
+
+
+def test_video_without_geometry(bundle, tmp_path):
+    _fails([bundle / "video.mp4"], tmp_path, "give --gaussians PLY")
