@@ -101,6 +101,28 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     assert physics["stiffness"] == pytest.approx(a["stiffness"], rel=1e-6)
 
 
+def test_ground_from_the_landed_object(bundle, tmp_path):
+    result, out = _predict(
+        [
+            bundle / "video.mp4",
+            "--camera",
+            bundle / "camera.json",
+            "--gaussians",
+            bundle / "gaussians.ply",
+            "--preview-frames",
+            "0",
+            "--ground",
+            "landed",
+        ],
+        tmp_path,
+    )
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "prediction.json").read_text())
+    physics = json.loads((out / "physics.json").read_text())
+    assert physics["ground_height"] == pytest.approx(summary["ground_check_m"], abs=1e-4)
+    assert abs(physics["ground_height"]) < 0.25  # the truth is 0; ± a few 32-px pixels' depth
+
+
 def test_python_api_returns_the_asset(dataset, sample_id):
     import reconphys
 

@@ -720,9 +720,11 @@ def train(
         typer.echo(f"{result.out} already has {result.step} steps (train.steps); nothing to do")
 
 
-# The user-path commands (predict, data video) live in their own module; importing it registers
-# them on `app` (it imports `app` from here, so this stays below the definitions it needs).
-from . import cli_predict  # noqa: E402, F401
+# The user-path commands (predict, data video) live in their own module.
+from .cli_predict import data_video, predict_command  # noqa: E402
+
+app.command("predict")(user_errors(predict_command))
+data_app.command("video")(user_errors(data_video))
 
 
 def main() -> None:

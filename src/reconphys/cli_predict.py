@@ -1,6 +1,7 @@
 """Commands of the user's path: ``reconphys predict`` and ``reconphys data video`` (docs/usage.md).
 
-Registered on the main app when :mod:`reconphys.cli` is imported.
+Plain functions with typer annotations; :mod:`reconphys.cli` registers them on its app (so they
+work the same through the ``reconphys`` script and ``python -m reconphys.cli``).
 """
 
 from __future__ import annotations
@@ -12,17 +13,20 @@ from pathlib import Path
 
 import typer
 
-from .cli import app, data_app, user_errors
 from .errors import InputError
 
 TIMING_ORDER = (
-    "model_load", "decode", "gaussians", "physics_network", "asset_build", "refine", "write",
+    "model_load",
+    "decode",
+    "gaussians",
+    "physics_network",
+    "asset_build",
+    "refine",
+    "write",
     "preview",
-)  # fmt: skip
+)
 
 
-@app.command("predict")
-@user_errors
 def predict_command(
     input: Path = typer.Argument(
         ..., help="Video file (mp4/mov/gif/...), folder of frames, or a dataset folder (--sample)."
@@ -39,6 +43,9 @@ def predict_command(
     view: int = typer.Option(None, help="Dataset input: the view (default: the model's)."),
     model: Path = typer.Option(None, help="Physics predictor (default: the shipped model)."),
     placement: str = typer.Option("auto", help="Given PLY: auto, as-is or fit (to frame 0)."),
+    ground: str = typer.Option(
+        "camera", help="Ground plane: camera (its file's ground_height, else 0) or landed."
+    ),
     anchors: int = typer.Option(None, help="Anchors N_A (default: the model's training data)."),
     refine: int = typer.Option(0, "--refine", help="Test-time refinement steps (0: none)."),
     refine_resolution: int = typer.Option(64, help="Render size of the refinement, pixels."),
@@ -62,11 +69,23 @@ def predict_command(
         raise InputError(f"must be ≥ 0, got {preview_frames}", field="--preview-frames")
     torch_device = resolve_device(device)
     result = predict(
-        input, gaussians=gaussians, masks=masks, background=background, camera=camera, fps=fps,
-        sample=sample, view=view, model=model, placement=placement, num_anchors=anchors,
-        refine_steps=refine, refine_resolution=refine_resolution, device=torch_device,
+        input,
+        gaussians=gaussians,
+        masks=masks,
+        background=background,
+        camera=camera,
+        fps=fps,
+        sample=sample,
+        view=view,
+        model=model,
+        placement=placement,
+        ground=ground,
+        num_anchors=anchors,
+        refine_steps=refine,
+        refine_resolution=refine_resolution,
+        device=torch_device,
         progress=True,
-    )  # fmt: skip
+    )
     summary = write_outputs(result, out, overwrite, preview_frames, torch_device)
     attributes = summary["attributes"]
     typer.echo(
@@ -86,8 +105,6 @@ def predict_command(
     typer.echo("seconds: " + ", ".join(parts))
 
 
-@data_app.command("video")
-@user_errors
 def data_video(
     root: Path = typer.Argument(..., help="Dataset folder."),
     sample: str = typer.Argument(..., help="Sample id (see manifest.json)."),
@@ -126,6 +143,7 @@ def data_video(
         (staging / "truth.json").write_text(
             json.dumps({"sample": sample, "view": view, **meta["attributes"]}, indent=1) + "\n"
         )
+        staging.chmod(0o755)  # mkdtemp makes it 0700
         if out.exists():
             shutil.rmtree(out)
         staging.replace(out)

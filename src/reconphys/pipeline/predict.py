@@ -37,6 +37,7 @@ from .model_input import predictor_frames
 from .settings import DEFAULT_NUM_ANCHORS
 
 PLACEMENTS = ("auto", "as-is", "fit")
+GROUNDS = ("camera", "landed")
 GT_GEOMETRY = "ground truth (the dataset sample's Gaussians and initial state): an upper bound"
 
 
@@ -105,6 +106,7 @@ def predict(
     view: int | None = None,
     model: str | os.PathLike | None = None,
     placement: str = "auto",
+    ground: str = "camera",
     num_anchors: int | None = None,
     refine_steps: int = 0,
     refine_resolution: int = 64,
@@ -124,6 +126,8 @@ def predict(
         raise InputError(
             f"expected one of {', '.join(PLACEMENTS)}, got {placement!r}", field="--placement"
         )
+    if ground not in GROUNDS:
+        raise InputError(f"expected camera or landed, got {ground!r}", field="--ground")
     if refine_steps < 0:
         raise InputError(f"must be ≥ 0, got {refine_steps}", field="--refine")
     torch.set_flush_denormal(True)
@@ -193,6 +197,23 @@ def predict(
     means = placed.means if gaussians is not None else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)
     details["ground_check_m"] = None if landed is None else round(landed, 4)
+    ground_height = observation.camera.ground_height
+    if ground == "landed":
+        if landed is None:
+            raise InputError(
+                "cannot estimate the ground from the last frame's mask",
+                source=observation.source,
+                field="--ground",
+            )
+        if gaussians is None:
+            raise InputError("a dataset sample's ground is known (z = 0)", field="--ground")
+        ground_height = landed
+        lowest = float(placed.means[:, 2].min())
+        if lowest < ground_height:  # the object must start above its ground
+            placed = placed.with_means(
+                placed.means + torch.tensor([0.0, 0.0, ground_height - lowest + 1e-3])
+            )
+    details["ground_height_m"] = round(ground_height, 4)
     timings["gaussians"] = time.perf_counter() - started
 
     started = time.perf_counter()
@@ -219,7 +240,7 @@ def predict(
             restitution=float(data.get("restitution", 0.0)),
             substeps=int(data.get("min_substeps", 100)),
             frame_dt=observation.frame_dt,
-            ground_height=observation.camera.ground_height,
+            ground_height=ground_height,
             object_id=_object_id(Path(gaussians)),
         )
         asset = build_asset(placed, physics, linear_velocity=velocity.tolist())
@@ -263,8 +284,8 @@ def write_outputs(
     import tempfile
 
     from ..assets.asset import write_asset
-    from ..render.video import write_mp4, write_strip
-    from .preview import side_by_side, simulate_and_render
+    from ..render.video import write_image, write_mp4
+    from .preview import contact_sheet, side_by_side, simulate_and_render
 
     out = Path(out)
     if out.exists() and not overwrite:
@@ -281,10 +302,14 @@ def write_outputs(
             simulated = simulate_and_render(result.asset, result.observation, count, device)
             video = side_by_side(result.observation.frames, simulated)
             write_mp4(staging / "preview.mp4", video, fps=1.0 / result.asset.physics.frame_dt)
-            write_strip(staging / "preview.png", video, count=6)
+            observed = result.observation.frames
+            write_image(staging / "preview.png", contact_sheet(observed, simulated))
             result.timings["preview"] = time.perf_counter() - started
         summary = result.summary()
         (staging / "prediction.json").write_text(json.dumps(summary, indent=2) + "\n")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(staging, 0o777 & ~umask)  # mkdtemp makes it 0700
         if out.exists():
             shutil.rmtree(out)
         os.replace(staging, out)

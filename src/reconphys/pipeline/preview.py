@@ -43,6 +43,32 @@ def simulate_and_render(
     return render_frames(asset, trajectory.x[0], cameras, backend).cpu()
 
 
+def contact_sheet(
+    observed: Tensor,  # [T_obs, H, W, 3]
+    simulated: Tensor,  # [T, H, W, 3]
+    count: int = 6,
+) -> np.ndarray:  # [2H' + SEPARATOR, count·(W' + SEPARATOR), 3] uint8
+    """``count`` evenly spaced frames: the recording on top (black past its end), the simulated
+    asset below, so each column compares one instant."""
+    from ..render.video import to_uint8
+
+    num_frames, height, width = simulated.shape[:3]
+    picks = np.linspace(0, num_frames - 1, min(count, num_frames)).round().astype(int)
+    factor = max(1, math.ceil(PREVIEW_MIN_SIZE / 2 / max(height, width)))
+    top = torch.zeros(len(picks), height, width, 3)
+    for column, t in enumerate(picks):
+        if t < observed.shape[0]:
+            top[column] = observed[t]
+    top, bottom = _enlarge(top, factor), _enlarge(simulated[picks], factor)
+    grey = 0.5
+    rows = []
+    for images in (top, bottom):
+        bar = torch.full((len(picks), images.shape[1], SEPARATOR, 3), grey)
+        rows.append(torch.cat([images, bar], dim=2).permute(1, 0, 2, 3).flatten(1, 2))
+    sheet = torch.cat([rows[0], torch.full((SEPARATOR, rows[0].shape[1], 3), grey), rows[1]])
+    return to_uint8(sheet)
+
+
 def side_by_side(
     observed: Tensor,  # [T_obs, H, W, 3]
     simulated: Tensor,  # [T, H, W, 3], T ≥ T_obs

@@ -90,7 +90,7 @@ def refine(
         )
         losses.append(loss.item())
         if losses[-1] < best[0]:
-            best = (losses[-1], {k: float(v[0]) for k, v in values.items()})
+            best = (losses[-1], {k: v[0].item() for k, v in values.items()})
         if step == steps:
             break
         loss.backward()

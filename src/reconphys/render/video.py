@@ -61,6 +61,19 @@ def write_mp4(
     return path
 
 
+def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
+    """Write one [H, W, 3] uint8 image as PNG, atomically."""
+    path = Path(path)
+    tmp = _atomic_target(path)
+    try:
+        imageio.imwrite(tmp, image, format="PNG")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
 def write_strip(
     path: str | os.PathLike,
     frames: np.ndarray,  # [T, H, W, 3] uint8
@@ -70,12 +83,4 @@ def write_strip(
     path = Path(path)
     frames = np.asarray(frames)
     picks = np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int)
-    strip = np.concatenate(list(frames[picks]), axis=1)
-    tmp = _atomic_target(path)
-    try:
-        imageio.imwrite(tmp, strip, format="PNG")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    return write_image(path, np.concatenate(list(frames[picks]), axis=1))
