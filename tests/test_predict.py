@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from reconphys.capture import default_camera, load_observation
 from reconphys.capture.placement import estimate_linear_velocity, fit_to_mask
-from reconphys.capture.video import resample_indices
+from reconphys.capture.video import resample_indices, resample_times
 from reconphys.cli import app
 from reconphys.models.physics_predictor import resize_frames
 from reconphys.pipeline.model_input import predictor_frames
@@ -136,6 +136,8 @@ def test_python_api_returns_the_asset(dataset, sample_id):
 def test_resampling_picks_the_nearest_frames():
     assert resample_indices(30, 1 / 0.03, 0.03).tolist() == list(range(30))
     assert resample_indices(59, 2 / 0.03, 0.03).tolist() == list(range(0, 59, 2))
+    # a GIF: frames appear at 0, 0.03, 0.06 and 0.12 s (the third held twice as long), end 0.15 s
+    assert resample_times(np.array([0.0, 0.03, 0.06, 0.12, 0.15]), 0.03).tolist() == [0, 1, 2, 2, 3]
     picks = resample_indices(100, 60.0, 0.03)  # 0.03 s = 1.8 recorded frames
     assert picks[:4].tolist() == [0, 2, 4, 5] and len(picks) == 56  # 99/60 s / 0.03 s + 1
 
@@ -155,6 +157,19 @@ def test_a_double_rate_video_is_resampled_to_frame_dt(bundle, tmp_path):
     resampled = load_observation(doubled, camera=bundle / "camera.json")
     assert resampled.num_frames == original.num_frames
     assert (resampled.frames - original.frames).abs().mean() < 0.02
+
+
+def test_transparent_gif_gives_the_masks(bundle, tmp_path):
+    frames = np.stack(imageio.mimread(bundle / "video.mp4"))
+    alpha = np.where(frames.max(-1) > 40, 255, 0).astype(np.uint8)
+    alpha[:, :, :4] = 0  # a transparent stripe that background subtraction would not find
+    gif = tmp_path / "drop.gif"
+    rgba = list(np.concatenate([frames, alpha[..., None]], -1))
+    imageio.mimwrite(gif, rgba, duration=30, disposal=2)  # 2: transparent shows the backdrop
+    observation = load_observation(gif, camera=bundle / "camera.json")
+    assert observation.mask_source == "alpha channel" and observation.num_frames == 30
+    assert torch.equal(observation.masks, torch.from_numpy(alpha > 127).float())
+    assert float(observation.frames[:, :, :4].abs().max()) == 0  # background set to black
 
 
 def test_predictor_input_warps_other_intrinsics_to_the_dataset_camera(dataset, sample_id):

@@ -30,7 +30,13 @@ from .masks import (
     read_mask_folder,
     subtract_background,
 )
-from .video import VIDEO_SUFFIXES, read_frame_folder, read_video, resample_indices
+from .video import (
+    VIDEO_SUFFIXES,
+    read_frame_folder,
+    read_video,
+    resample_indices,
+    resample_times,
+)
 
 
 @dataclass
@@ -122,17 +128,20 @@ def load_observation(
         return _dataset_observation(path, sample, view)
     if sample is not None:
         raise InputError("--sample is for dataset folders (with manifest.json)", source=str(path))
+    times = None
     if path.is_dir():
         raw, recorded_fps = read_frame_folder(path), None
     elif path.suffix.lower() in VIDEO_SUFFIXES:
-        raw, recorded_fps = read_video(path)
+        raw, recorded_fps, times = read_video(path)
     else:
         raise InputError(
             f"expected a video ({', '.join(VIDEO_SUFFIXES)}) or a folder of frames",
             source=str(path),
         )
-    rate = fps or recorded_fps or 1.0 / frame_dt
-    picks = resample_indices(raw.shape[0], rate, frame_dt)
+    if times is not None and fps is None:  # variable frame rate (GIF): the display times
+        picks = resample_times(times, frame_dt)
+    else:
+        picks = resample_indices(raw.shape[0], fps or recorded_fps or 1.0 / frame_dt, frame_dt)
     height, width = raw.shape[1:3]
     if masks is not None:
         all_masks = read_mask_folder(masks, raw.shape[0], height, width)

@@ -32,12 +32,39 @@ def _as_rgb_or_rgba(frame: np.ndarray, source: str) -> np.ndarray:
     return frame
 
 
-def read_video(path: str | os.PathLike) -> tuple[np.ndarray, float | None]:
-    """All frames of a video file → ([T, H, W, 3|4] uint8, frames per second or None).
+def _same_channels(frames: list[np.ndarray]) -> list[np.ndarray]:
+    """RGB and RGBA frames mixed (GIF decoders give the first frame without alpha) → all RGBA,
+    or all RGB when no frame is transparent anywhere."""
+    if all(f.shape[-1] == 3 for f in frames):
+        return frames
+    if all(f.shape[-1] == 3 or bool((f[..., 3] == 255).all()) for f in frames):
+        return [f[..., :3] for f in frames]
+    opaque = np.uint8(255)
+    return [f if f.shape[-1] == 4 else np.dstack([f, np.full(f.shape[:2], opaque)]) for f in frames]
 
-    GIF keeps its alpha channel when it has transparency; its frame rate comes from the first
-    frame's duration. Raises InputError (one line naming the file) for a missing or unreadable
-    file and for a video without frames.
+
+def _read_gif(path: Path) -> tuple[list[np.ndarray], np.ndarray]:
+    """GIF frames (RGBA) and the time each one appears, seconds [T + 1] (the last entry is when
+    the clip ends): GIF encoders merge repeated frames into one longer frame, so the frame rate
+    is not constant."""
+    from PIL import Image, ImageSequence
+
+    frames, durations = [], []
+    with Image.open(path) as image:
+        for frame in ImageSequence.Iterator(image):
+            frames.append(np.asarray(frame.convert("RGBA")))
+            durations.append(float(frame.info.get("duration") or 0.0) / 1000.0)
+    if frames and not all(d > 0 for d in durations):
+        durations = [0.1] * len(frames)  # browsers' default for a missing delay
+    return frames, np.concatenate([[0.0], np.cumsum(durations)])
+
+
+def read_video(path: str | os.PathLike) -> tuple[np.ndarray, float | None, np.ndarray | None]:
+    """All frames of a video file → ([T, H, W, 3|4] uint8, frames per second or None, display
+    times [T + 1] seconds for variable-rate files (GIF) or None).
+
+    GIF keeps its alpha channel when it has transparency. Raises InputError (one line naming the
+    file) for a missing or unreadable file and for a video without frames.
     """
     import imageio.v2 as imageio
 
@@ -45,30 +72,37 @@ def read_video(path: str | os.PathLike) -> tuple[np.ndarray, float | None]:
     source = str(path)
     if not path.is_file():
         raise InputError("video file not found", source=source)
-    fps = None
+    fps, times = None, None
     frames = []
     try:
         if path.suffix.lower() == ".gif":
-            reader = imageio.get_reader(path, format="GIF", mode="I")
-            duration_ms = reader.get_meta_data().get("duration")
-            if duration_ms:
-                fps = 1000.0 / float(duration_ms)
+            raw, times = _read_gif(path)
+            frames = [_as_rgb_or_rgba(frame, source) for frame in raw]
         else:
-            reader = imageio.get_reader(path, format="FFMPEG")
-            fps = reader.get_meta_data().get("fps")
-        with reader:
-            for frame in reader:
-                frames.append(_as_rgb_or_rgba(frame, source))
+            with imageio.get_reader(path, format="FFMPEG") as reader:
+                fps = reader.get_meta_data().get("fps")
+                for frame in reader:
+                    frames.append(_as_rgb_or_rgba(frame, source))
     except InputError:
         raise
-    except Exception as e:  # imageio raises many types (OSError, RuntimeError, IndexError, ...)
+    except Exception as e:  # decoders raise many types (OSError, RuntimeError, IndexError, ...)
         message = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise InputError(f"cannot decode the video ({message})", source=source) from None
     if not frames:
         raise InputError("the video has no frames", source=source)
+    frames = _same_channels(frames)
     if len({f.shape for f in frames}) != 1:
         raise InputError("frames of different sizes", source=source)
-    return np.stack(frames), (float(fps) if fps and np.isfinite(fps) and fps > 0 else None)
+    fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
+    return np.stack(frames), fps, times
+
+
+def resample_times(times: np.ndarray, frame_dt: float) -> np.ndarray:
+    """Indices of the frames on screen at 0, frame_dt, 2·frame_dt, ... before the clip ends, for
+    frames that appear at ``times[:-1]`` and a clip that ends at ``times[-1]`` (seconds)."""
+    count = int(np.floor((times[-1] - 1e-9) / frame_dt)) + 1
+    targets = np.arange(count) * frame_dt
+    return np.searchsorted(times[:-1], targets + 1e-9, side="right") - 1
 
 
 def list_images(folder: str | os.PathLike) -> list[Path]:
@@ -111,7 +145,7 @@ def read_frame_folder(folder: str | os.PathLike) -> np.ndarray:
     if not files:
         kinds = "/".join(IMAGE_SUFFIXES)
         raise InputError(f"no frames ({kinds}) in the folder", source=str(folder))
-    frames = [_as_rgb_or_rgba(read_image(p), str(p)) for p in files]
+    frames = _same_channels([_as_rgb_or_rgba(read_image(p), str(p)) for p in files])
     shapes = {f.shape for f in frames}
     if len(shapes) != 1:
         raise InputError(f"frames of different sizes {sorted(shapes)}", source=str(folder))
