@@ -721,9 +721,10 @@ def train(
 
 
 # The user-path commands (predict, data video) live in their own module.
-from .cli_predict import data_video, predict_command  # noqa: E402
+from .cli_predict import data_video, predict_command, train_gs_command  # noqa: E402
 
 app.command("predict")(user_errors(predict_command))
+app.command("train-gs")(user_errors(train_gs_command))
 data_app.command("video")(user_errors(data_video))
 
 

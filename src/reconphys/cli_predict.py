@@ -151,3 +151,47 @@ def data_video(
         shutil.rmtree(staging, ignore_errors=True)
         raise
     typer.echo(f"wrote {out}: video.mp4, camera.json, gaussians.ply, truth.json")
+
+
+def train_gs_command(
+    data: Path = typer.Option(..., "--data", help="Dataset folder written by make-data."),
+    out: Path = typer.Option(..., "--out", help="Output folder (resumes when run again)."),
+    steps: int = typer.Option(2000, help="Optimiser steps."),
+    batch_size: int = typer.Option(4, help="Samples per step."),
+    lr: float = typer.Option(1e-3, help="Peak learning rate (cosine to 10 %)."),
+    silhouette_weight: float = typer.Option(1.0, help="Weight of the alpha-vs-mask loss."),
+    checkpoint_every: int = typer.Option(200, help="Steps between checkpoints."),
+    seed: int = typer.Option(0, help="Seed of the initialisation and the batches."),
+    threads: int = typer.Option(2, help="CPU threads (torch)."),
+    no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
+):
+    """Train the feed-forward 3DGS predictor (first frame → one Gaussian per object pixel) on
+    frame 0 of a dataset's four views; writes OUT/model.safetensors + model.json."""
+    from .threads import set_cpu_threads
+    from .train.gaussians import GaussianTrainSettings, train_gaussian_predictor
+
+    for name, value in (
+        ("--steps", steps),
+        ("--batch-size", batch_size),
+        ("--checkpoint-every", checkpoint_every),
+        ("--threads", threads),
+    ):
+        if value < 1:
+            raise InputError(f"must be ≥ 1, got {value}", field=name)
+    if not (math.isfinite(lr) and lr > 0):
+        raise InputError(f"must be a positive number, got {lr}", field="--lr")
+    if not data.is_dir():
+        raise InputError("dataset folder not found", source=str(data))
+    set_cpu_threads(threads)
+    settings = GaussianTrainSettings(
+        data=str(data),
+        out=str(out),
+        steps=steps,
+        batch_size=batch_size,
+        lr=lr,
+        silhouette_weight=silhouette_weight,
+        seed=seed,
+        checkpoint_every=checkpoint_every,
+    )
+    train_gaussian_predictor(settings, progress=not no_progress, log=typer.echo)
+    typer.echo(f"wrote {out / 'model.safetensors'}")

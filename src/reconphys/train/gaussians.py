@@ -1,0 +1,189 @@
+"""Training the feed-forward 3DGS predictor (``reconphys train-gs``, docs/usage.md).
+
+Each training sample is frame 0 of a dataset sample: the predictor reads one view (masked by the
+same background subtraction ``predict`` uses), its Gaussians on the object's pixels are rendered
+into all four views, and the loss is the mean squared colour error plus ``silhouette_weight`` ×
+the mean squared error between the rendered alpha and the views' masks. The input view cycles
+through 0–3 so that every view is both input and target.
+
+The run writes ``OUT/model.safetensors`` + ``model.json`` (the predictor), ``OUT/log.jsonl`` (one
+line per step) and ``OUT/checkpoint.pt`` every ``checkpoint_every`` steps; running the same
+command again resumes from the checkpoint (same settings) and repeats the uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..capture.masks import subtract_background
+from ..data.dataset import DropDataset
+from ..errors import InputError
+from ..models.gaussian_predictor import GaussianPredictor, GaussianPredictorConfig
+from ..models.gaussian_shipped import save_gaussian_predictor
+from ..render import Cameras, render
+
+CHECKPOINT = "checkpoint.pt"
+
+
+@dataclass
+class GaussianTrainSettings:
+    data: str
+    out: str
+    split: str = "train"
+    steps: int = 2000
+    batch_size: int = 4
+    lr: float = 1e-3
+    min_lr_ratio: float = 0.1
+    silhouette_weight: float = 1.0
+    seed: int = 0
+    checkpoint_every: int = 200
+    predictor: dict = field(default_factory=dict)  # GaussianPredictorConfig overrides
+
+
+def frame0_views(dataset: DropDataset, index: int) -> dict:
+    """Frame 0 of all views of a sample: images [V, R, R, 3], masks [V, R, R], K, world_to_cam."""
+    item = dataset[index]
+    images = item["frames"][:, 0].float()
+    return {
+        "images": images,
+        "masks": subtract_background(images),
+        "K": item["K"].float(),
+        "world_to_cam": item["world_to_cam"].float(),
+    }
+
+
+def sample_loss(
+    model: GaussianPredictor, views: dict, input_view: int, silhouette_weight: float
+) -> tuple[torch.Tensor, dict]:
+    """Loss of one sample read from ``input_view`` and rendered into every view."""
+    v = input_view
+    gaussians = model(
+        views["images"][v : v + 1],
+        views["masks"][v : v + 1],
+        views["K"][v : v + 1],
+        views["world_to_cam"][v : v + 1],
+    )
+    keep = views["masks"][v].reshape(-1) > 0.5
+    if not bool(keep.any()):
+        raise InputError("empty mask in the input view of a training sample")
+    object_gaussians = gaussians.map(lambda t: t[0]).select(keep)
+    size = views["images"].shape[1]
+    cameras = Cameras(views["K"], views["world_to_cam"], size, size)
+    out = render(object_gaussians, cameras)
+    colour = F.mse_loss(out.rgb, views["images"])
+    silhouette = F.mse_loss(out.alpha.reshape(views["masks"].shape), views["masks"])
+    loss = colour + silhouette_weight * silhouette
+    return loss, {"colour": colour.item(), "silhouette": silhouette.item()}
+
+
+def _lr(step: int, settings: GaussianTrainSettings) -> float:
+    progress = (step - 1) / max(1, settings.steps - 1)
+    floor = settings.min_lr_ratio
+    return settings.lr * (floor + (1 - floor) * 0.5 * (1 + math.cos(math.pi * progress)))
+
+
+def train_gaussian_predictor(
+    settings: GaussianTrainSettings,
+    progress: bool = True,
+    log=print,
+    stop_after: int | None = None,  # tests: end after this step as if killed (no model written)
+):
+    """Run (or resume) the training described by ``settings``; returns the output folder."""
+    out = Path(settings.out)
+    dataset = DropDataset(settings.data, split=settings.split, frames=[0])
+    if len(dataset) == 0:
+        raise InputError(f"no samples in split {settings.split!r}", source=settings.data)
+    resolution = dataset.settings.resolution
+    config = GaussianPredictorConfig(**{"resolution": resolution, **settings.predictor})
+    torch.manual_seed(settings.seed)
+    model = GaussianPredictor(config)
+    optimizer = torch.optim.Adam(model.parameters(), lr=settings.lr)
+    first_step = 1
+    checkpoint_path = out / CHECKPOINT
+    if checkpoint_path.is_file():
+        state = torch.load(checkpoint_path, weights_only=True)
+        if state["settings"] != asdict(settings):
+            raise InputError(
+                "a run with other settings is in this folder (use another --out)", source=str(out)
+            )
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        first_step = state["step"] + 1
+        log(f"resuming from step {state['step']}")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "settings.json").write_text(json.dumps(asdict(settings), indent=1) + "\n")
+    log_path = out / "log.jsonl"
+    if log_path.exists():  # drop lines past the checkpoint: the resumed run rewrites them
+        lines = [
+            line
+            for line in log_path.read_text().splitlines()
+            if json.loads(line)["step"] < first_step
+        ]
+        log_path.write_text("".join(line + "\n" for line in lines))
+    steps = range(first_step, settings.steps + 1)
+    if progress:
+        from tqdm.auto import tqdm
+
+        steps = tqdm(
+            steps, desc="train-gs", unit="step", initial=first_step - 1, total=settings.steps
+        )
+    started = time.perf_counter()
+    model.train()
+    for step in steps:
+        rng = np.random.default_rng([settings.seed, step])
+        picks = rng.choice(len(dataset), size=min(settings.batch_size, len(dataset)), replace=False)
+        for group in optimizer.param_groups:
+            group["lr"] = _lr(step, settings)
+        optimizer.zero_grad()
+        losses, parts = [], []
+        for b, index in enumerate(picks):
+            loss, part = sample_loss(
+                model, frame0_views(dataset, int(index)), (step + b) % 4, settings.silhouette_weight
+            )
+            losses.append(loss)
+            parts.append(part)
+        loss = torch.stack(losses).mean()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        optimizer.step()
+        record = {
+            "step": step,
+            "loss": loss.item(),
+            "lr": _lr(step, settings),
+            "colour": float(np.mean([p["colour"] for p in parts])),
+            "silhouette": float(np.mean([p["silhouette"] for p in parts])),
+        }
+        with open(log_path, "a") as f:
+            f.write(json.dumps(record) + "\n")
+        if progress:
+            steps.set_postfix(loss=f"{record['loss']:.4f}")
+        if step % settings.checkpoint_every == 0 or step == settings.steps:
+            state = {
+                "model": model.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "step": step,
+                "settings": asdict(settings),
+            }
+            tmp = checkpoint_path.with_suffix(".tmp")
+            torch.save(state, tmp)
+            tmp.replace(checkpoint_path)
+        if stop_after is not None and step >= stop_after:
+            return out
+    training = {
+        "data": str(Path(settings.data).resolve()),
+        "samples": len(dataset),
+        "settings": asdict(settings),
+        "resolution": resolution,
+        "wall_clock_seconds_last_session": round(time.perf_counter() - started, 1),
+        "final_loss": record["loss"] if settings.steps >= first_step else None,
+    }
+    save_gaussian_predictor(model.eval(), out / "model.safetensors", training)
+    return out
