@@ -313,5 +313,53 @@ def test_camera_file_with_wrong_shapes(bundle, tmp_path, change, expected):
     )
 
 
-def test_video_without_geometry(bundle, tmp_path):
-    _fails([bundle / "video.mp4"], tmp_path, "give --gaussians PLY")
+def test_video_without_geometry_or_3dgs_predictor(bundle, tmp_path):
+    missing = tmp_path / "nowhere.safetensors"
+    _fails([bundle / "video.mp4", "--gs-model", missing], tmp_path, "3DGS predictor not found")
+
+
+def test_predicted_geometry_from_the_first_frame(bundle, dataset, sample_id, tmp_path):
+    from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
+
+    settings = GaussianTrainSettings(
+        data=str(dataset),
+        out=str(tmp_path / "gs"),
+        split="test",
+        steps=2,
+        batch_size=1,
+        predictor={"channels": [8, 16]},
+    )
+    train_gaussian_predictor(settings, progress=False, log=lambda s: None)
+    result, out = _predict(
+        [
+            bundle / "video.mp4",
+            "--camera",
+            bundle / "camera.json",
+            "--gs-model",
+            tmp_path / "gs",
+            "--preview-frames",
+            "0",
+        ],
+        tmp_path,
+    )
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "prediction.json").read_text())
+    assert summary["geometry"].startswith("predicted by the 3DGS predictor")
+    mask_pixels = int((load_observation(bundle / "video.mp4").masks[0] > 0.5).sum())
+    assert 0 < summary["gaussians"] <= mask_pixels  # one per object pixel at most
+    stored, _ = _predict(
+        [
+            dataset,
+            "--sample",
+            sample_id,
+            "--geometry",
+            "predicted",
+            "--gs-model",
+            tmp_path / "gs",
+            "--preview-frames",
+            "0",
+        ],
+        tmp_path,
+        "stored",
+    )
+    assert stored.exit_code == 0, stored.output

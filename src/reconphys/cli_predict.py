@@ -33,7 +33,7 @@ def predict_command(
     ),
     out: Path = typer.Option(..., "--out", help="Asset folder to write (DESIGN §6 + preview)."),
     gaussians: Path = typer.Option(
-        None, help="Gaussian PLY of the object (needed for videos and frame folders)."
+        None, help="Gaussian PLY of the object (default: predicted from frame 0)."
     ),
     masks: Path = typer.Option(None, help="Folder of object masks, one image per frame."),
     background: Path = typer.Option(None, help="Clean plate image for background subtraction."),
@@ -42,6 +42,12 @@ def predict_command(
     sample: str = typer.Option(None, help="Dataset input: the sample id."),
     view: int = typer.Option(None, help="Dataset input: the view (default: the model's)."),
     model: Path = typer.Option(None, help="Physics predictor (default: the shipped model)."),
+    geometry: str = typer.Option(
+        "auto",
+        help="auto (--gaussians, else a dataset's true Gaussians, else the 3DGS predictor) or "
+        "predicted (the 3DGS predictor even for a dataset sample).",
+    ),
+    gs_model: Path = typer.Option(None, help="3DGS predictor (default: the shipped one)."),
     placement: str = typer.Option("auto", help="Given PLY: auto, as-is or fit (to frame 0)."),
     ground: str = typer.Option(
         "camera", help="Ground plane: camera (its file's ground_height, else 0) or landed."
@@ -78,6 +84,8 @@ def predict_command(
         sample=sample,
         view=view,
         model=model,
+        geometry=geometry,
+        gs_model=gs_model,
         placement=placement,
         ground=ground,
         num_anchors=anchors,

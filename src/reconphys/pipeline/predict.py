@@ -38,6 +38,7 @@ from .settings import DEFAULT_NUM_ANCHORS
 
 PLACEMENTS = ("auto", "as-is", "fit")
 GROUNDS = ("camera", "landed")
+GEOMETRIES = ("auto", "predicted")
 GT_GEOMETRY = "ground truth (the dataset sample's Gaussians and initial state): an upper bound"
 
 
@@ -94,6 +95,34 @@ def _given_gaussians(ply: Path, observation: Observation, placement: str):
     }
 
 
+def predicted_gaussians(observation: Observation, gs_model=None):
+    """Frame 0 → the 3DGS predictor's Gaussians on the object's pixels (world frame), and the
+    model's path. The frame and its mask are resampled to the dataset's intrinsics at the
+    model's size (as the physics network's input), so the camera's pose places them."""
+    from ..models.gaussian_predictor import prune_gaussians
+    from ..models.gaussian_shipped import load_gaussian_predictor
+    from .model_input import virtual_intrinsics
+
+    loaded = load_gaussian_predictor(gs_model)
+    size = loaded.model.config.resolution
+    frame = predictor_frames(observation.frames[:1], observation.camera.K, size)[0, 0]
+    mask = (
+        predictor_frames(
+            observation.masks[:1, ..., None].expand(-1, -1, -1, 3), observation.camera.K, size
+        )[0, 0, ..., 0]
+        > 0.5
+    )
+    K = virtual_intrinsics(size).float()
+    w2c = observation.camera.world_to_cam.float()
+    with torch.no_grad():
+        g = loaded.model(frame[None], mask[None].float(), K[None], w2c[None])
+    try:
+        pruned = prune_gaussians(g.map(lambda t: t[0]), mask.reshape(-1).float())
+    except ValueError as e:
+        raise InputError(str(e), source=observation.source) from None
+    return pruned.map(lambda t: t.detach().float()), loaded.path
+
+
 def predict(
     input: str | os.PathLike,
     *,
@@ -105,6 +134,8 @@ def predict(
     sample: str | None = None,
     view: int | None = None,
     model: str | os.PathLike | None = None,
+    geometry: str = "auto",
+    gs_model: str | os.PathLike | None = None,
     placement: str = "auto",
     ground: str = "camera",
     num_anchors: int | None = None,
@@ -119,9 +150,10 @@ def predict(
     Turns on ``torch.set_flush_denormal`` (as the CLI does): settling objects and far Gaussian
     tails otherwise produce float32 denormals that slow CPUs down several times.
     """
-    from ..assets.build import build_asset
     from ..models.shipped import load_predictor
 
+    if geometry not in GEOMETRIES:
+        raise InputError(f"expected auto or predicted, got {geometry!r}", field="--geometry")
     if placement not in PLACEMENTS:
         raise InputError(
             f"expected one of {', '.join(PLACEMENTS)}, got {placement!r}", field="--placement"
@@ -169,12 +201,60 @@ def predict(
         "ground_height": observation.camera.ground_height,
     }
 
+    return predict_observation(
+        observation,
+        predictor,
+        timings,
+        details,
+        gaussians=gaussians,
+        geometry=geometry,
+        gs_model=gs_model,
+        placement=placement,
+        ground=ground,
+        num_anchors=num_anchors,
+        refine_steps=refine_steps,
+        refine_resolution=refine_resolution,
+        progress=progress,
+    )
+
+
+def predict_observation(
+    observation: Observation,
+    predictor,  # a LoadedPredictor (reconphys.models.shipped)
+    timings: dict[str, float] | None = None,
+    details: dict | None = None,
+    *,
+    gaussians: str | os.PathLike | None = None,
+    geometry: str = "auto",
+    gs_model: str | os.PathLike | None = None,
+    placement: str = "auto",
+    ground: str = "camera",
+    num_anchors: int | None = None,
+    refine_steps: int = 0,
+    refine_resolution: int = 64,
+    progress: bool = False,
+) -> PredictResult:
+    """The steps after decoding (see :func:`predict`), for an observation already in memory
+    (e.g. a dataset sample in ``evaluate``)."""
+    from ..assets.build import build_asset
+
+    timings = {} if timings is None else timings
+    details = {} if details is None else details
     started = time.perf_counter()
     dataset_asset = observation.sample.get("asset")
     if gaussians is not None:
         placed, placement_info = _given_gaussians(Path(gaussians), observation, placement)
         details["geometry"] = f"given: {gaussians}"
         details.update(placement_info)
+        object_id = _object_id(Path(gaussians))
+    elif dataset_asset is not None and geometry != "predicted":
+        details["geometry"] = GT_GEOMETRY
+        details["initial_velocity"] = {"how": "the dataset sample's (ground truth)"}
+    else:
+        placed, gs_path = predicted_gaussians(observation, gs_model)
+        details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
+        object_id = f"predicted-{Path(observation.source).stem}"
+    if gaussians is not None or dataset_asset is None or geometry == "predicted":
         velocity = estimate_linear_velocity(
             placed.means, observation.masks, observation.camera, observation.frame_dt
         )
@@ -184,17 +264,10 @@ def predict(
             "how": "free fall of the mask centroid over frames 0–3 (angular velocity not "
             "estimated)",
         }
-    elif dataset_asset is not None:
-        details["geometry"] = GT_GEOMETRY
-        details["initial_velocity"] = {"how": "the dataset sample's (ground truth)"}
+        build_new = True
     else:
-        raise InputError(
-            "no geometry: give --gaussians PLY (e.g. from an image-to-3D tool, placed in the "
-            "camera's world frame or fitted to the first frame's mask); the feed-forward 3DGS "
-            "predictor is not built yet",
-            source=observation.source,
-        )
-    means = placed.means if gaussians is not None else dataset_asset.gaussians.means
+        build_new = False
+    means = placed.means if build_new else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)
     details["ground_check_m"] = None if landed is None else round(landed, 4)
     ground_height = observation.camera.ground_height
@@ -205,9 +278,10 @@ def predict(
                 source=observation.source,
                 field="--ground",
             )
-        if gaussians is None:
+        if not build_new:
             raise InputError("a dataset sample's ground is known (z = 0)", field="--ground")
         ground_height = landed
+    if build_new:
         lowest = float(placed.means[:, 2].min())
         if lowest < ground_height:  # the object must start above its ground
             placed = placed.with_means(
@@ -228,7 +302,7 @@ def predict(
     timings["physics_network"] = time.perf_counter() - started
 
     started = time.perf_counter()
-    if gaussians is not None:
+    if build_new:
         data = _model_data_settings(predictor)
         physics = PhysicsSettings(
             **attributes,
@@ -241,7 +315,7 @@ def predict(
             substeps=int(data.get("min_substeps", 100)),
             frame_dt=observation.frame_dt,
             ground_height=ground_height,
-            object_id=_object_id(Path(gaussians)),
+            object_id=object_id,
         )
         asset = build_asset(placed, physics, linear_velocity=velocity.tolist())
     else:
