@@ -24,9 +24,14 @@ from reconphys.threads import set_cpu_threads
 
 runner = CliRunner()
 TINY = PredictorConfig(
-    encoder_channels=(4,), token_channels=8, trunk_blocks=1, attention_heads=2,
-    mlp_hidden=(8,), num_frames=4, resolution=16,
-)  # fmt: skip
+    encoder_channels=(4,),
+    token_channels=8,
+    trunk_blocks=1,
+    attention_heads=2,
+    mlp_hidden=(8,),
+    num_frames=4,
+    resolution=16,
+)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -41,9 +46,16 @@ def one_thread():
 def dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("method") / "data"
     settings = make_settings(
-        objects=0, test_objects=1, test_samples_per_object=1, resolution=16, num_gaussians=200,
-        num_anchors=24, num_neighbors=6, min_substeps=20, seed=5,
-    )  # fmt: skip
+        objects=0,
+        test_objects=1,
+        test_samples_per_object=1,
+        resolution=16,
+        num_gaussians=200,
+        num_anchors=24,
+        num_neighbors=6,
+        min_substeps=20,
+        seed=5,
+    )
     make_dataset(settings, root, workers=1, device="cpu")
     return root
 
@@ -70,13 +82,55 @@ def test_predicts_from_the_model_view_on_the_true_geometry(dataset, model_path):
     assert prediction.asset.gaussians is truth.gaussians
 
 
+def test_feed_forward_method_uses_no_ground_truth(dataset, model_path, tmp_path, monkeypatch):
+    from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
+
+    gs = train_gaussian_predictor(
+        GaussianTrainSettings(
+            data=str(dataset),
+            out=str(tmp_path / "gs"),
+            split="test",
+            steps=1,
+            batch_size=1,
+            predictor={"channels": [8, 16]},
+        ),
+        progress=False,
+        log=lambda s: None,
+    )
+    monkeypatch.setenv("RECONPHYS_GS_MODEL", str(gs))
+    sample = EvalSet(dataset, "test").load(0)
+    options = MethodOptions(trivial=EvalSet(dataset, "test").trivial_attributes(), model=model_path)
+    method = METHODS["reconphys_ff"](options)
+    assert not method.uses_ground_truth  # reported without the upper-bound mark
+    prediction = method.predict(sample)
+    expected = load_predictor(model_path).predict(sample.frames[1:2])
+    for name, value in prediction.attributes.items():  # same physics network, same view
+        assert value == pytest.approx(float(expected[name][0]), rel=1e-5)
+    asset, truth = prediction.asset, sample.true_asset
+    assert asset.gaussians.num_gaussians <= 16 * 16  # one per object pixel of the 16-px view
+    assert asset.gaussians.num_gaussians != truth.gaussians.num_gaussians
+    assert not torch.equal(asset.v0, truth.v0)  # estimated, not the truth
+
+
 def test_evaluate_command_reports_reconphys_beside_trivial(dataset, model_path, tmp_path):
     out = tmp_path / "report"
     args = [
-        "evaluate", "--data", str(dataset), "--out", str(out), "--methods", "trivial,reconphys",
-        "--model", str(model_path), "--emd-points", "32", "--chamfer-points", "64",
-        "--sheet-samples", "0",
-    ]  # fmt: skip
+        "evaluate",
+        "--data",
+        str(dataset),
+        "--out",
+        str(out),
+        "--methods",
+        "trivial,reconphys",
+        "--model",
+        str(model_path),
+        "--emd-points",
+        "32",
+        "--chamfer-points",
+        "64",
+        "--sheet-samples",
+        "0",
+    ]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     metrics = json.loads((out / "metrics.json").read_text())
@@ -104,4 +158,4 @@ def test_evaluate_model_errors_are_one_line(dataset, tmp_path, monkeypatch):
     line = run("--methods", "reconphys", "--model", str(tmp_path / "none.safetensors"))
     assert "model file not found" in line
     line = run("--methods", "trivial", "--model", str(tmp_path / "none.safetensors"))
-    assert "--model: only the reconphys method uses a model" in line
+    assert "--model: only the reconphys methods use a model" in line

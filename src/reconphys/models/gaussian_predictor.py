@@ -170,3 +170,28 @@ def prune_gaussians(
     if index.numel() == 0:
         raise ValueError("no Gaussian is left after pruning (empty mask or all transparent)")
     return gaussians.select(index)
+
+
+def billboard_gaussians(
+    image: Tensor,  # [R, R, 3] in [0, 1]
+    mask: Tensor,  # [R, R]
+    K: Tensor,  # [3, 3] at R
+    world_to_cam: Tensor,  # [4, 4]
+    depth: float = 2.0,  # metres along the camera z
+) -> Gaussians:  # [M, ·], M = object pixels
+    """The trivial geometry: a flat cut-out — one opaque, isotropic Gaussian (σ = 0.4 px) per object
+    pixel, with the pixel's colour, on the plane ``z_cam = depth``."""
+    rays = pixel_rays(K[None].to(image.dtype), image.shape[0])[0].reshape(-1, 3)
+    keep = mask.reshape(-1) > 0.5
+    points_cam = rays[keep] * depth
+    rotation, translation = world_to_cam[:3, :3].to(image.dtype), world_to_cam[:3, 3]
+    count = int(keep.sum())
+    scale = 0.4 * depth / float(K[0, 0])  # 0.4 px: neighbours barely overlap, metres
+    rgb = image.reshape(-1, 3)[keep]
+    return Gaussians(
+        means=(points_cam - translation.to(image.dtype)) @ rotation,
+        quats=torch.tensor([1.0, 0.0, 0.0, 0.0]).expand(count, 4).clone(),
+        log_scales=torch.full((count, 3), math.log(scale)),
+        opacity_logits=torch.full((count,), 4.0),
+        sh0=(rgb - 0.5) / SH_C0,
+    )

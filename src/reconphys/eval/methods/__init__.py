@@ -7,7 +7,9 @@
 - ``springgaus_gt``: its attribute fit alone, on the true geometry (upper bound on geometry);
 - ``appearance``: per-frame position fit, no physics, no future (4DGS-like);
 - ``reconphys``: the trained physics predictor's attributes on the true geometry (upper bound on
-  geometry; compare with ``trivial``).
+  geometry; compare with ``trivial``);
+- ``reconphys_ff``: the whole feed-forward pipeline (3DGS predictor + physics predictor, estimated
+  initial velocity): what ``predict VIDEO`` does without a PLY.
 
 A new method (the project's model, next issues) subclasses :class:`Method` and is added to
 ``METHODS``; nothing else changes.
@@ -20,6 +22,7 @@ from .appearance import AppearanceMethod
 from .base import FITTED_GEOMETRY, GROUND_TRUTH_GEOMETRY, Method, MethodOptions, Prediction
 from .oracle import OracleMethod
 from .reconphys import ReconPhysMethod
+from .reconphys_ff import ReconPhysFeedForwardMethod
 from .springgaus import SpringGausMethod, SpringGausTruthMethod
 from .trivial import TrivialMethod
 
@@ -30,6 +33,7 @@ METHODS: dict[str, type[Method]] = {
     "springgaus_gt": SpringGausTruthMethod,
     "appearance": AppearanceMethod,
     "reconphys": ReconPhysMethod,
+    "reconphys_ff": ReconPhysFeedForwardMethod,
 }
 
 

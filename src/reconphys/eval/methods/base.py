@@ -20,6 +20,7 @@ from ..samples import EvalSample, TrivialAttributes
 
 GROUND_TRUTH_GEOMETRY = "ground truth"  # the true Gaussians, anchors and initial state
 FITTED_GEOMETRY = "fitted to the 4 views"
+PREDICTED_GEOMETRY = "predicted from frame 0 of one view (the 3DGS predictor)"
 
 
 @dataclass
