@@ -7,7 +7,10 @@ Two cases, each timed end to end through :func:`reconphys.pipeline.predict.predi
   mp4, camera.json, gaussians.ply) at the shipped model's input size (32 px, 20 frames read,
   2 000 Gaussians, 256 anchors) — the issue-7 target: physics network + asset build ≤ 1 s on the
   2-core CPU (≤ 0.1 s on an H100);
-- ``large``: the same video with a 20 000-Gaussian procedural object and 2 048 anchors.
+- ``large``: the same video with a 20 000-Gaussian procedural object and 2 048 anchors;
+- ``predicted``: no PLY — the 3DGS predictor makes the Gaussians from frame 0 (``--gs-model``,
+  default the shipped one; skipped when there is none): the whole feed-forward pipeline, whose
+  issue-8 target is decode → 3DGS → physics → asset ≤ 2 s on the 2-core CPU.
 
     python benchmarks/bench_predict.py data/cpu_small [--sample ID] [--device cpu|cuda]
 
@@ -31,6 +34,8 @@ from common import machine_description
 
 from reconphys.assets.ply import write_ply
 from reconphys.assets.procedural import make_procedural_gaussians
+from reconphys.errors import InputError
+from reconphys.models.gaussian_shipped import load_gaussian_predictor
 from reconphys.physics.anchors import farthest_point_sampling, farthest_point_sampling_reference
 from reconphys.pipeline.predict import predict
 from reconphys.threads import set_cpu_threads
@@ -51,6 +56,7 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--gs-model", default=None, help="3DGS predictor for the predicted case")
     args = parser.parse_args()
     set_cpu_threads(args.threads)
     manifest = json.loads((Path(args.data) / "manifest.json").read_text())
@@ -86,10 +92,15 @@ def main() -> None:
             "shipped": dict(gaussians=bundle / "gaussians.ply"),
             "large": dict(gaussians=Path(tmp) / "big.ply", num_anchors=2048),
         }
+        try:
+            load_gaussian_predictor(args.gs_model)
+            cases["predicted"] = dict(gs_model=args.gs_model)
+        except InputError as e:
+            print(f"# predicted case skipped: {e}")
         print(
-            f"{'case':8s} {'gaussians':>9s} {'anchors':>7s} "
+            f"{'case':9s} {'gaussians':>9s} {'anchors':>7s} "
             + " ".join(f"{s:>15s}" for s in STEPS)
-            + f" {'network+build':>14s}"
+            + f" {'network+build':>14s} {'all four':>9s}"
         )
         for name, extra in cases.items():
             kwargs = dict(
@@ -103,10 +114,10 @@ def main() -> None:
             timings = best_timings(args.repeats, **kwargs)
             target = timings["physics_network"] + timings["asset_build"]
             print(
-                f"{name:8s} {result.asset.gaussians.num_gaussians:9d} "
+                f"{name:9s} {result.asset.gaussians.num_gaussians:9d} "
                 f"{result.asset.num_anchors:7d} "
                 + " ".join(f"{timings[s]:15.4f}" for s in STEPS)
-                + f" {target:14.4f}"
+                + f" {target:14.4f} {sum(timings.values()):9.4f}"
             )
     points = torch.rand(16384, 3, generator=torch.Generator().manual_seed(0)).double()
     farthest_point_sampling(points, 8)  # compile / load from the cache
