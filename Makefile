@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DEMO_OUT ?= demo_out
 
-.PHONY: install demo test lint bench model clean
+.PHONY: install demo test lint bench model gs-model clean
 
 install: $(VENV)/.installed
 
@@ -47,6 +47,14 @@ model: install
 	    train.log_every=5 train.out=runs/cpu_small_mixed
 	cp runs/cpu_small_mixed/model.safetensors src/reconphys/weights/physics_predictor.safetensors
 	cp runs/cpu_small_mixed/model.json src/reconphys/weights/physics_predictor.json
+
+# The shipped 3DGS predictor's recipe (docs/usage.md "The 3DGS predictor"): frame 0 of the
+# cpu_small data (made by `make model` above), 1500 steps × 4 samples.
+gs-model: install
+	$(BIN)/reconphys train-gs --data data/cpu_small --out runs/gs_cpu_small --steps 1500 \
+	    --batch-size 4 --threads 1 --no-progress
+	cp runs/gs_cpu_small/model.safetensors src/reconphys/weights/gaussian_predictor.safetensors
+	cp runs/gs_cpu_small/model.json src/reconphys/weights/gaussian_predictor.json
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache .ruff_cache
