@@ -11,6 +11,7 @@ import json
 
 import pytest
 import torch
+from helpers import train_tiny_gaussian_predictor
 from typer.testing import CliRunner
 
 from reconphys.cli import app
@@ -83,20 +84,7 @@ def test_predicts_from_the_model_view_on_the_true_geometry(dataset, model_path):
 
 
 def test_feed_forward_method_uses_no_ground_truth(dataset, model_path, tmp_path, monkeypatch):
-    from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
-
-    gs = train_gaussian_predictor(
-        GaussianTrainSettings(
-            data=str(dataset),
-            out=str(tmp_path / "gs"),
-            split="test",
-            steps=1,
-            batch_size=1,
-            predictor={"channels": [8, 16]},
-        ),
-        progress=False,
-        log=lambda s: None,
-    )
+    gs = train_tiny_gaussian_predictor(dataset, tmp_path / "gs")
     monkeypatch.setenv("RECONPHYS_GS_MODEL", str(gs))
     sample = EvalSet(dataset, "test").load(0)
     options = MethodOptions(trivial=EvalSet(dataset, "test").trivial_attributes(), model=model_path)

@@ -14,7 +14,7 @@ import imageio.v2 as imageio
 import numpy as np
 import pytest
 import torch
-from helpers import make_tiny_dataset
+from helpers import make_tiny_dataset, train_tiny_gaussian_predictor
 from typer.testing import CliRunner
 
 from reconphys.capture import default_camera, load_observation
@@ -99,6 +99,32 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     assert abs(a["friction"] - b["friction"]) < 0.2
     physics = json.loads((out / "physics.json").read_text())
     assert physics["stiffness"] == pytest.approx(a["stiffness"], rel=1e-6)
+
+
+def test_refine_from_the_command_line(dataset, sample_id, tmp_path):
+    result, out = _predict(
+        [
+            dataset,
+            "--sample",
+            sample_id,
+            "--refine",
+            "2",
+            "--refine-resolution",
+            "16",
+            "--preview-frames",
+            "0",
+        ],
+        tmp_path,
+    )
+    assert result.exit_code == 0, result.output
+    assert "refine: 2 steps" in result.output
+    summary = json.loads((out / "prediction.json").read_text())
+    history = summary["refine"]
+    assert len(history["loss_curve"]) == 3 and history["render_size"] == [16, 16]
+    assert history["loss_best"] == pytest.approx(min(history["loss_curve"]), abs=1e-6)
+    physics = json.loads((out / "physics.json").read_text())
+    assert physics["stiffness"] == pytest.approx(history["attributes"]["stiffness"], rel=1e-6)
+    assert summary["feed_forward"]["mass"] == pytest.approx(physics["mass"], rel=1e-6)
 
 
 def test_ground_from_the_landed_object(bundle, tmp_path):
@@ -319,17 +345,7 @@ def test_video_without_geometry_or_3dgs_predictor(bundle, tmp_path):
 
 
 def test_predicted_geometry_from_the_first_frame(bundle, dataset, sample_id, tmp_path):
-    from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
-
-    settings = GaussianTrainSettings(
-        data=str(dataset),
-        out=str(tmp_path / "gs"),
-        split="test",
-        steps=2,
-        batch_size=1,
-        predictor={"channels": [8, 16]},
-    )
-    train_gaussian_predictor(settings, progress=False, log=lambda s: None)
+    train_tiny_gaussian_predictor(dataset, tmp_path / "gs", steps=2)
     result, out = _predict(
         [
             bundle / "video.mp4",
