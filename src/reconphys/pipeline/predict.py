@@ -4,8 +4,9 @@ Steps, each timed (``PredictResult.timings``, seconds):
 
 - ``decode``: read the video / frames / dataset sample, masks, camera (:mod:`..capture`);
 - ``gaussians``: the canonical Gaussians — a given PLY placed on the first frame's mask (or kept
-  where it is when it already projects onto it), or a dataset sample's own (ground truth, an upper
-  bound); the initial linear velocity from the masks' free fall;
+  where it is when it already projects onto it), the 3DGS predictor's from frame 0 (no PLY), or
+  a dataset sample's own (ground truth, an upper bound); the initial linear velocity from the
+  masks' free fall;
 - ``physics_network``: the physics predictor on frames 0..T−1 → (m, k, d, f);
 - ``asset_build``: anchors (seeded by the object id), kNN springs, binding;
 - ``refine`` (optional): test-time photometric refinement (:mod:`.refine`).
@@ -242,6 +243,7 @@ def predict_observation(
     details = {} if details is None else details
     started = time.perf_counter()
     dataset_asset = observation.sample.get("asset")
+    build_new = True  # a new asset from given or predicted Gaussians (not the dataset's own)
     if gaussians is not None:
         placed, placement_info = _given_gaussians(Path(gaussians), observation, placement)
         details["geometry"] = f"given: {gaussians}"
@@ -250,11 +252,12 @@ def predict_observation(
     elif dataset_asset is not None and geometry != "predicted":
         details["geometry"] = GT_GEOMETRY
         details["initial_velocity"] = {"how": "the dataset sample's (ground truth)"}
+        build_new = False
     else:
         placed, gs_path = predicted_gaussians(observation, gs_model)
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
         object_id = f"predicted-{Path(observation.source).stem}"
-    if gaussians is not None or dataset_asset is None or geometry == "predicted":
+    if build_new:
         velocity = estimate_linear_velocity(
             placed.means, observation.masks, observation.camera, observation.frame_dt
         )
@@ -264,9 +267,6 @@ def predict_observation(
             "how": "free fall of the mask centroid over frames 0–3 (angular velocity not "
             "estimated)",
         }
-        build_new = True
-    else:
-        build_new = False
     means = placed.means if build_new else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)
     details["ground_check_m"] = None if landed is None else round(landed, 4)
