@@ -44,7 +44,7 @@ STEPS = ("decode", "gaussians", "physics_network", "asset_build")
 
 
 def best_timings(repeats: int, **kwargs) -> dict[str, float]:
-    predict(**kwargs)  # warm-up: Numba compilation, allocator, file cache
+    """Best time per step of ``repeats`` calls (the caller has made the warm-up call)."""
     runs = [predict(**kwargs).timings for _ in range(repeats)]
     return {step: min(run[step] for run in runs) for step in STEPS}
 
@@ -110,7 +110,7 @@ def main() -> None:
                 placement="as-is",
                 **extra,
             )
-            result = predict(**kwargs)
+            result = predict(**kwargs)  # warm-up: Numba compilation, allocator, file cache
             timings = best_timings(args.repeats, **kwargs)
             target = timings["physics_network"] + timings["asset_build"]
             print(

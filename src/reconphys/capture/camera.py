@@ -26,7 +26,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from ..render import Cameras, dataset_views
+from ..render import Cameras
 
 
 @dataclass
@@ -70,8 +70,10 @@ class CameraSpec:
 
 def default_camera(width: int, height: int, view: int = 0) -> CameraSpec:
     """The dataset's view ``view`` at ``width × height`` (DESIGN §3)."""
-    cams = dataset_views(width, height)
-    return CameraSpec(cams.K[view], cams.world_to_cam[view], width, height)
+    from ..simulate import default_view
+
+    camera = default_view(width, height, view)
+    return CameraSpec(camera.K[0], camera.world_to_cam[0], width, height)
 
 
 def _matrix(data: dict, key: str, shape: tuple[int, int], source: str) -> Tensor:

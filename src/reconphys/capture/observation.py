@@ -62,6 +62,29 @@ class Observation:
         return self.frames.shape[2], self.frames.shape[1]
 
 
+def stored_observation(
+    frames: Tensor,  # [T, H, W, 3] in [0, 1], black background (a dataset view)
+    K: Tensor,  # [3, 3] pixels at (W, H)
+    world_to_cam: Tensor,  # [4, 4]
+    frame_dt: float,
+    source: str,
+    sample: dict | None = None,
+) -> Observation:
+    """An observation of frames already in memory (a dataset view: black backdrop, ground z = 0)."""
+    height, width = frames.shape[1:3]
+    camera = CameraSpec(K.double(), world_to_cam.double(), width, height, 0.0, source)
+    return Observation(
+        frames=frames,
+        masks=subtract_background(frames),
+        camera=camera,
+        frame_dt=frame_dt,
+        source=source,
+        mask_source="background subtraction (black backdrop)",
+        recorded_frames=frames.shape[0],
+        sample=sample or {},
+    )
+
+
 def _dataset_observation(root: Path, sample: str, view: int) -> Observation:
     from ..data.dataset import DropDataset
     from ..data.storage import read_manifest
@@ -70,26 +93,13 @@ def _dataset_observation(root: Path, sample: str, view: int) -> Observation:
     dataset = DropDataset(root, views=[view], allow_incomplete=True, verify=False)
     index = dataset.index_of(sample)
     item = dataset[index]
-    frames = item["frames"][0].float()  # [T, H, W, 3]
-    height, width = frames.shape[1:3]
-    camera = CameraSpec(
-        item["K"][0].double(),
-        item["world_to_cam"][0].double(),
-        width,
-        height,
-        0.0,
-        f"{root} (sample {sample}, view {view})",
-    )
-    masks = subtract_background(frames)
-    return Observation(
-        frames=frames,
-        masks=masks,
-        camera=camera,
-        frame_dt=dataset.settings.frame_dt,
-        source=f"{root} sample {sample} view {view} (stored frames)",
-        mask_source="background subtraction (black backdrop)",
-        recorded_frames=frames.shape[0],
-        sample={
+    return stored_observation(
+        item["frames"][0].float(),
+        item["K"][0],
+        item["world_to_cam"][0],
+        dataset.settings.frame_dt,
+        f"{root} sample {sample} view {view} (stored frames)",
+        {
             "root": str(root),
             "id": sample,
             "view": view,

@@ -83,14 +83,9 @@ def silhouette_iou(
     max_size: int = 64,  # rendered at most this many pixels on the long side
 ) -> float:
     """IoU of the rendered silhouette (alpha > 0.5) and the mask, at a reduced size."""
-    import torch.nn.functional as F
-
     small = _reduced(camera, max_size)
     alpha = rendered_mask(gaussians, small) > 0.5
-    target = (
-        F.interpolate(mask[None, None].float(), size=(small.height, small.width), mode="area")[0, 0]
-        > 0.5
-    )
+    target = _reduced_mask(mask, small) > 0.5
     union = float((alpha | target).sum())
     return float((alpha & target).sum()) / union if union > 0 else 0.0
 
@@ -98,6 +93,14 @@ def silhouette_iou(
 def _reduced(camera: CameraSpec, max_size: int) -> CameraSpec:
     scale = min(1.0, max_size / max(camera.width, camera.height))
     return camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
+
+
+def _reduced_mask(mask: Tensor, small: CameraSpec) -> Tensor:  # [H, W] → [h, w] in {0, 1}
+    """The mask area-averaged to the reduced camera's size, thresholded at one half."""
+    import torch.nn.functional as F
+
+    size = (small.height, small.width)
+    return (F.interpolate(mask[None, None].float(), size=size, mode="area")[0, 0] > 0.5).float()
 
 
 def rendered_mask(gaussians: Gaussians, camera: CameraSpec) -> Tensor:  # [H, W] alpha > 0.5
@@ -118,13 +121,9 @@ def fit_to_mask(
     """Translate the Gaussians so that their rendered silhouette's box matches the mask's box
     (same orientation and size; the depth follows from the apparent size). An empty or
     off-screen silhouette returns the Gaussians unchanged."""
-    import torch.nn.functional as F
-
     small = _reduced(camera, max_size)
-    target_mask = F.interpolate(
-        mask[None, None].float(), size=(small.height, small.width), mode="area"
-    )[0, 0]
-    if float((target_mask > 0.5).sum()) == 0:
+    target_mask = _reduced_mask(mask, small)
+    if float(target_mask.sum()) == 0:
         return gaussians
     target = mask_box(target_mask)
     target_centre = torch.stack([(target[0] + target[1]) / 2, (target[2] + target[3]) / 2])

@@ -98,13 +98,17 @@ def _given_gaussians(ply: Path, observation: Observation, placement: str):
 
 def predicted_gaussians(observation: Observation, gs_model=None):
     """Frame 0 → the 3DGS predictor's Gaussians on the object's pixels (world frame), and the
-    model's path. The frame and its mask are resampled to the dataset's intrinsics at the
-    model's size (as the physics network's input), so the camera's pose places them."""
+    model's path. ``gs_model``: a path, a loaded predictor, or None (the default one). The frame
+    and its mask are resampled to the dataset's intrinsics at the model's size (as the physics
+    network's input), so the camera's pose places them."""
     from ..models.gaussian_predictor import prune_gaussians
-    from ..models.gaussian_shipped import load_gaussian_predictor
+    from ..models.gaussian_shipped import LoadedGaussianPredictor, load_gaussian_predictor
     from .model_input import virtual_intrinsics
 
-    loaded = load_gaussian_predictor(gs_model)
+    if isinstance(gs_model, LoadedGaussianPredictor):
+        loaded = gs_model
+    else:
+        loaded = load_gaussian_predictor(gs_model)
     size = loaded.model.config.resolution
     frame = predictor_frames(observation.frames[:1], observation.camera.K, size)[0, 0]
     mask = (

@@ -16,7 +16,6 @@ from torch import Tensor
 
 from ..assets.asset import Asset
 from ..capture import Observation
-from ..render import Cameras
 from .settings import PREVIEW_MIN_SIZE
 
 SEPARATOR = 2  # pixels of grey between the panels
@@ -36,11 +35,7 @@ def simulate_and_render(
     from ..simulate import render_frames, simulate_asset
 
     trajectory = simulate_asset(asset, num_frames - 1, torch.device(device))
-    camera = observation.camera
-    cameras = Cameras(
-        camera.K[None].float(), camera.world_to_cam[None].float(), camera.width, camera.height
-    )
-    return render_frames(asset, trajectory.x[0], cameras, backend).cpu()
+    return render_frames(asset, trajectory.x[0], observation.camera.cameras(), backend).cpu()
 
 
 def contact_sheet(

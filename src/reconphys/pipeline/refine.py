@@ -19,7 +19,6 @@ import torch.nn.functional as F
 from ..assets.asset import Asset
 from ..capture import Observation
 from ..physics.model import ATTRIBUTE_RANGES
-from ..render import Cameras
 from ..train.objective import SceneBatch, photometric_loss
 
 REFINE_LR = 0.05  # Adam step in log k, log d and logit f
@@ -50,7 +49,7 @@ def refine(
             0, 2, 3, 1
         )
     camera = observation.camera.resized(size[1], size[0])
-    cameras = Cameras(camera.K[None].float(), camera.world_to_cam[None].float(), size[1], size[0])
+    cameras = camera.cameras()
     scenes = SceneBatch.from_assets([asset])
     physics = asset.physics
     mass = torch.tensor([physics.mass])

@@ -13,8 +13,8 @@ The 3DGS predictor: ``$RECONPHYS_GS_MODEL`` or the shipped one (see
 
 from __future__ import annotations
 
-from ...capture import CameraSpec, Observation
-from ...capture.masks import subtract_background
+from ...capture.observation import stored_observation
+from ...models.gaussian_shipped import load_gaussian_predictor
 from ...models.shipped import load_predictor
 from ...pipeline.predict import predict_observation
 from ..samples import EvalSample
@@ -29,27 +29,19 @@ class ReconPhysFeedForwardMethod(Method):
     def __init__(self, options: MethodOptions):
         super().__init__(options)
         self.predictor = load_predictor(options.model, device=options.device)
+        self.gs_predictor = load_gaussian_predictor()  # once, not per sample
 
     def predict(self, sample: EvalSample) -> Prediction:
         view = self.predictor.view
-        frames = sample.frames[view]  # [T, H, W, 3]
-        height, width = frames.shape[1:3]
-        camera = CameraSpec(
-            sample.cameras.K[view].double(),
-            sample.cameras.world_to_cam[view].double(),
-            width,
-            height,
-            0.0,
+        observation = stored_observation(
+            sample.frames[view],
+            sample.cameras.K[view],
+            sample.cameras.world_to_cam[view],
+            sample.frame_dt,
             f"{sample.id} view {view}",
         )
-        observation = Observation(
-            frames=frames,
-            masks=subtract_background(frames),
-            camera=camera,
-            frame_dt=sample.frame_dt,
-            source=sample.id,
-            mask_source="background subtraction",
+        result = predict_observation(
+            observation, self.predictor, geometry="predicted", gs_model=self.gs_predictor
         )
-        result = predict_observation(observation, self.predictor, geometry="predicted")
         info = {"gaussians": result.asset.gaussians.num_gaussians, **result.timings}
         return Prediction(asset=result.asset, info=info)
