@@ -1,7 +1,8 @@
 """Differentiable Gaussian renderer: Gaussians + cameras → colour, alpha and depth images.
 
-Two interchangeable backends with the same semantics (gsplat's "classic" 3DGS rasterisation):
-``"torch"`` (pure PyTorch, any device and dtype, the reference) and ``"gsplat"`` (CUDA kernels).
+Three interchangeable backends with the same semantics (gsplat's "classic" 3DGS rasterisation):
+``"torch"`` (pure PyTorch, any device and dtype, the reference), ``"numba"`` (the same projection,
+compiled CPU compositing with a hand-written backward) and ``"gsplat"`` (CUDA kernels).
 The object is rendered on a black background (DESIGN §3); ``rgb`` is the premultiplied colour.
 """
 
@@ -15,6 +16,7 @@ from torch import Tensor
 from reconphys.assets.gaussians import Gaussians
 from reconphys.render.cameras import Cameras, dataset_views, intrinsics_from_fov, look_at
 from reconphys.render.gsplat_backend import gsplat_available, rasterize_gsplat
+from reconphys.render.numba_backend import numba_available, rasterize_numba
 from reconphys.render.torch_backend import rasterize_torch
 
 __all__ = [
@@ -27,7 +29,8 @@ __all__ = [
     "render",
 ]
 
-BACKENDS = ("auto", "torch", "gsplat")
+BACKENDS = ("auto", "torch", "numba", "gsplat")
+RASTERIZERS = {"torch": rasterize_torch, "numba": rasterize_numba, "gsplat": rasterize_gsplat}
 
 
 @dataclass
@@ -38,11 +41,23 @@ class RenderOutput:
 
 
 def available_backends() -> list[str]:
-    """Backends that can render on this machine: always "torch", "gsplat" with gsplat + CUDA."""
+    """Backends that can render on this machine: always "torch", "numba" with Numba, "gsplat"
+    with gsplat + CUDA."""
     backends = ["torch"]
+    if numba_available():
+        backends.append("numba")
     if torch.cuda.is_available() and gsplat_available():
         backends.append("gsplat")
     return backends
+
+
+def auto_backend(device: torch.device) -> str:
+    """The backend ``render(..., backend="auto")`` picks for tensors on ``device``."""
+    if device.type == "cuda" and gsplat_available():
+        return "gsplat"
+    if device.type == "cpu" and numba_available():
+        return "numba"
+    return "torch"
 
 
 def render(
@@ -54,8 +69,9 @@ def render(
 ) -> RenderOutput:
     """Render a (batch of) Gaussian set(s) into C cameras.
 
-    ``backend``: "torch", "gsplat", or "auto" (gsplat when it is importable and the Gaussians are
-    on a CUDA device, the torch renderer otherwise). Cameras without batch dims are shared by every
+    ``backend``: "torch", "numba", "gsplat", or "auto": gsplat when it is importable and the
+    Gaussians are on a CUDA device, numba when Numba is installed and they are on the CPU, the torch
+    renderer otherwise. Cameras without batch dims are shared by every
     element of a batch of Gaussians. ``near_plane`` is in metres, ``eps2d`` in pixels². gsplat
     computes in float32 whatever the input dtype; use backend="torch" for float64 (e.g. gradcheck).
     """
@@ -70,10 +86,8 @@ def render(
             )
         cameras = cameras.expand(batch_shape)
     if backend == "auto":
-        use_gsplat = gaussians.means.is_cuda and gsplat_available()
-        backend = "gsplat" if use_gsplat else "torch"
-    rasterize = rasterize_gsplat if backend == "gsplat" else rasterize_torch
-    rgb, alpha, depth = rasterize(
+        backend = auto_backend(gaussians.means.device)
+    rgb, alpha, depth = RASTERIZERS[backend](
         gaussians.means,
         gaussians.quats,
         gaussians.scales,

@@ -319,15 +319,77 @@ def rasterize_torch(
     _check_shapes(means, quats, scales, opacities, colors, world_to_cam, K)
     if chunk_pixels is None:
         chunk_pixels = DEFAULT_CHUNK_PIXELS_GPU if means.is_cuda else DEFAULT_CHUNK_PIXELS_CPU
-    batch_shape = means.shape[:-2]
-    num_cameras = world_to_cam.shape[-3]
-    num_channels = colors.shape[-1]
+    images = project_images(
+        means, quats, scales, opacities, colors, world_to_cam, K, width, height, near_plane, eps2d
+    )
+    composited = [
+        _rasterize_image(
+            images.means2d[i],
+            images.conics[i],
+            images.opacities[i],
+            images.features[i],
+            images.depths[i],
+            images.radii[i],
+            width=width,
+            height=height,
+            chunk_pixels=chunk_pixels,
+            chunk_gaussians=chunk_gaussians,
+        )
+        for i in range(images.num_images)
+    ]
+    return images.split_outputs(torch.stack(composited))
 
+
+@dataclass
+class ImageInputs:
+    """Per-image inputs of the compositing stage, every image of the batch flattened into I.
+
+    What each image accumulates per pixel is ``features = (colour, camera z, 1)``: the weighted
+    sums give the premultiplied colour, the depth numerator and alpha.
+    """
+
+    means2d: Tensor  # [I, N, 2] pixels
+    conics: Tensor  # [I, N, 3] 1/px²
+    opacities: Tensor  # [I, N] in [0, 1]
+    features: Tensor  # [I, N, D + 2]
+    depths: Tensor  # [I, N] camera z, metres (the front-to-back sort key)
+    radii: Tensor  # [I, N, 2] screen-box half-sizes, pixels (0 = culled)
+    image_shape: tuple[int, ...]  # (..., C): I = their product
+    num_channels: int  # D
+
+    @property
+    def num_images(self) -> int:
+        return self.means2d.shape[0]
+
+    def split_outputs(
+        self,
+        composited: Tensor,  # [I, H, W, D + 2] accumulated features
+    ) -> tuple[Tensor, Tensor, Tensor]:  # rgb [..., C, H, W, D], alpha, depth [..., C, H, W]
+        stacked = composited.reshape(*self.image_shape, *composited.shape[1:])
+        rgb = stacked[..., : self.num_channels]
+        alpha = stacked[..., -1]
+        depth = stacked[..., -2] / alpha.clamp_min(1e-10)
+        return rgb, alpha, depth
+
+
+def project_images(
+    means: Tensor,  # [..., N, 3] world frame, metres
+    quats: Tensor,  # [..., N, 4] wxyz
+    scales: Tensor,  # [..., N, 3] metres
+    opacities: Tensor,  # [..., N]
+    colors: Tensor,  # [..., N, D]
+    world_to_cam: Tensor,  # [..., C, 4, 4]
+    K: Tensor,  # [..., C, 3, 3]
+    width: int,
+    height: int,
+    near_plane: float,
+    eps2d: float,
+) -> ImageInputs:
+    """Project every Gaussian into every camera and gather what each image composites."""
     projected = project_gaussians(
         means, quats, scales, opacities, world_to_cam, K, width, height, near_plane, eps2d
     )
-    image_shape = (*batch_shape, num_cameras)
-    # Per image: what to accumulate = (colour, depth, 1); the last sum is alpha.
+    image_shape = (*means.shape[:-2], world_to_cam.shape[-3])
     features = torch.cat(
         [
             colors.unsqueeze(-3).expand(*image_shape, *colors.shape[-2:]),
@@ -345,18 +407,4 @@ def rasterize_torch(
         "radii": projected.radii,
     }
     flat = {name: t.reshape(-1, *t.shape[len(image_shape) :]) for name, t in per_image.items()}
-    images = [
-        _rasterize_image(
-            **{name: t[i] for name, t in flat.items()},
-            width=width,
-            height=height,
-            chunk_pixels=chunk_pixels,
-            chunk_gaussians=chunk_gaussians,
-        )
-        for i in range(flat["means2d"].shape[0])
-    ]
-    stacked = torch.stack(images).reshape(*image_shape, height, width, num_channels + 2)
-    rgb = stacked[..., :num_channels]
-    alpha = stacked[..., -1]
-    depth = stacked[..., -2] / alpha.clamp_min(1e-10)
-    return rgb, alpha, depth
+    return ImageInputs(**flat, image_shape=image_shape, num_channels=colors.shape[-1])

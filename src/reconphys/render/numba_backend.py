@@ -1,0 +1,276 @@
+"""Compiled CPU compositing (Numba): the fast twin of the torch renderer on CPU.
+
+Projection stays in PyTorch (:func:`torch_backend.project_images`, autograd for its backward);
+the per-pixel front-to-back compositing, which costs almost all of the torch renderer's time on a
+CPU (dense [pixels × Gaussians] tensors, a cumulative sum and their autograd), runs here as
+compiled loops with a hand-written backward, the way gsplat's CUDA kernels do it:
+
+- forward: the image is cut into 16 × 16 tiles; each tile lists the depth-sorted Gaussians whose
+  screen box contains one of its pixel centres; each pixel walks its tile's list front to back
+  with the rules of the torch reference (``alpha = min(0.999, o · exp(−power))``, skip
+  ``alpha < 1/255``, stop before the transmittance would reach ``≤ 1e-4``) and keeps its final
+  transmittance and how far along the list it got;
+- backward: each pixel walks the same list back to front from where it stopped, recovering the
+  transmittance before each Gaussian by division by ``1 − alpha`` (``alpha ≤ 0.999``) and the sum
+  of what lies behind it, which gives ∂/∂alpha and from it the gradients of the 2D means, conics,
+  opacities and features. Work is split into one interleaved share of (image, tile) tasks per
+  thread, each accumulating into its own gradient buffer (no atomics), summed at the end.
+
+Same semantics as the torch reference; results differ from it by float round-off (the reference
+keeps the transmittance as a logarithm). Scalars are computed in float64 whatever the input
+dtype. ``tests/test_render_numba.py`` compares values and gradients with the reference and runs
+gradcheck; ``benchmarks/bench_renderer.py`` times both in one run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from .torch_backend import (
+    ALPHA_THRESHOLD,
+    MAX_ALPHA,
+    MIN_TRANSMITTANCE,
+    _check_shapes,
+    project_images,
+)
+
+try:  # Numba is optional: the torch renderer is used wherever it is missing.
+    import numba
+except ImportError:  # pragma: no cover - depends on the machine
+    numba = None
+
+TILE = 16  # pixels per tile side
+
+
+def numba_available() -> bool:
+    return numba is not None
+
+
+def _tile_list_py(means2d, radii, order, count, image, x0, x1, y0, y1, ids):
+    """Fill ``ids`` with the depth-sorted Gaussians of ``image`` whose screen box holds the centre
+    of a pixel in columns [x0, x1) and rows [y0, y1); return how many there are."""
+    m = 0
+    for r in range(count):
+        g = order[image, r]
+        mx = means2d[image, g, 0]
+        my = means2d[image, g, 1]
+        rx = radii[image, g, 0]
+        ry = radii[image, g, 1]
+        if (
+            mx + rx >= x0 + 0.5
+            and mx - rx <= x1 - 0.5
+            and my + ry >= y0 + 0.5
+            and my - ry <= y1 - 0.5
+        ):
+            ids[m] = g
+            m += 1
+    return m
+
+
+def _gaussian_at_py(means2d, conics, opacities, image, g, px, py):
+    """(dx, dy, vis, alpha) of Gaussian g at pixel centre (px, py): vis = exp(−power)."""
+    dx = px - means2d[image, g, 0]
+    dy = py - means2d[image, g, 1]
+    power = 0.5 * conics[image, g, 0] * dx * dx + conics[image, g, 1] * dx * dy
+    power += 0.5 * conics[image, g, 2] * dy * dy
+    vis = np.exp(-power)
+    alpha = min(MAX_ALPHA, opacities[image, g] * vis)
+    return dx, dy, vis, alpha
+
+
+def _forward_py(means2d, conics, opacities, features, radii, order, counts, out, final_t, last):
+    """Composite every image: out [I, H, W, F], final_t [I, H, W] (float64), last [I, H, W]
+    (how many entries of the pixel's tile list were walked, for the backward)."""
+    num_images, height, width = out.shape[0], out.shape[1], out.shape[2]
+    num_features = features.shape[2]
+    tiles_x = (width + TILE - 1) // TILE
+    tiles_y = (height + TILE - 1) // TILE
+    tiles = tiles_x * tiles_y
+    for task in numba.prange(num_images * tiles):
+        image = task // tiles
+        ty = (task % tiles) // tiles_x
+        tx = task % tiles_x
+        x0, y0 = tx * TILE, ty * TILE
+        x1, y1 = min(x0 + TILE, width), min(y0 + TILE, height)
+        ids = np.empty(counts[image], np.int64)
+        m = _tile_list(means2d, radii, order, counts[image], image, x0, x1, y0, y1, ids)
+        acc = np.zeros(num_features, np.float64)
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                acc[:] = 0.0
+                transmittance = 1.0
+                walked = 0
+                for r in range(m):
+                    g = ids[r]
+                    _, _, _, alpha = _gaussian_at(
+                        means2d, conics, opacities, image, g, x + 0.5, y + 0.5
+                    )
+                    if alpha < ALPHA_THRESHOLD:
+                        continue
+                    after = transmittance * (1.0 - alpha)
+                    if after <= MIN_TRANSMITTANCE:
+                        break
+                    weight = alpha * transmittance
+                    for f in range(num_features):
+                        acc[f] += weight * features[image, g, f]
+                    transmittance = after
+                    walked = r + 1
+                for f in range(num_features):
+                    out[image, y, x, f] = acc[f]
+                final_t[image, y, x] = transmittance
+                last[image, y, x] = walked
+
+
+def _backward_py(
+    means2d, conics, opacities, features, radii, order, counts, final_t, last, grad_out,
+    grad_means2d, grad_conics, grad_opacities, grad_features,
+):  # fmt: skip
+    """Accumulate the gradients of every image into the per-thread buffers grad_* [T, I, N, ·]."""
+    num_images, height, width = grad_out.shape[0], grad_out.shape[1], grad_out.shape[2]
+    num_features = features.shape[2]
+    tiles_x = (width + TILE - 1) // TILE
+    tiles_y = (height + TILE - 1) // TILE
+    tiles = tiles_x * tiles_y
+    chunks = grad_means2d.shape[0]
+    for c in numba.prange(chunks):
+        behind = np.zeros(num_features, np.float64)
+        for task in range(c, num_images * tiles, chunks):
+            image = task // tiles
+            ty = (task % tiles) // tiles_x
+            tx = task % tiles_x
+            x0, y0 = tx * TILE, ty * TILE
+            x1, y1 = min(x0 + TILE, width), min(y0 + TILE, height)
+            ids = np.empty(counts[image], np.int64)
+            m = _tile_list(means2d, radii, order, counts[image], image, x0, x1, y0, y1, ids)
+            if m == 0:
+                continue
+            for y in range(y0, y1):
+                for x in range(x0, x1):
+                    walked = last[image, y, x]
+                    transmittance = final_t[image, y, x]
+                    behind[:] = 0.0
+                    for r in range(walked - 1, -1, -1):
+                        g = ids[r]
+                        dx, dy, vis, alpha = _gaussian_at(
+                            means2d, conics, opacities, image, g, x + 0.5, y + 0.5
+                        )
+                        if alpha < ALPHA_THRESHOLD:
+                            continue
+                        one_minus = 1.0 - alpha
+                        transmittance /= one_minus  # the transmittance in front of g
+                        weight = alpha * transmittance
+                        grad_alpha = 0.0
+                        for f in range(num_features):
+                            upstream = grad_out[image, y, x, f]
+                            feature = features[image, g, f]
+                            grad_alpha += upstream * (
+                                feature * transmittance - behind[f] / one_minus
+                            )
+                            grad_features[c, image, g, f] += weight * upstream
+                            behind[f] += feature * weight
+                        opacity = opacities[image, g]
+                        if opacity * vis > MAX_ALPHA:  # clamped: no gradient through alpha
+                            continue
+                        grad_opacities[c, image, g] += vis * grad_alpha
+                        grad_power = -opacity * vis * grad_alpha
+                        a = conics[image, g, 0]
+                        b = conics[image, g, 1]
+                        cc = conics[image, g, 2]
+                        grad_means2d[c, image, g, 0] -= grad_power * (a * dx + b * dy)
+                        grad_means2d[c, image, g, 1] -= grad_power * (b * dx + cc * dy)
+                        grad_conics[c, image, g, 0] += grad_power * 0.5 * dx * dx
+                        grad_conics[c, image, g, 1] += grad_power * dx * dy
+                        grad_conics[c, image, g, 2] += grad_power * 0.5 * dy * dy
+
+
+if numba is not None:
+    _tile_list = numba.njit(cache=True, inline="always")(_tile_list_py)
+    _gaussian_at = numba.njit(cache=True, inline="always")(_gaussian_at_py)
+    _forward = numba.njit(parallel=True, cache=True)(_forward_py)
+    _backward = numba.njit(parallel=True, cache=True)(_backward_py)
+
+
+def _numpy(t: Tensor, dtype: torch.dtype) -> np.ndarray:
+    return t.detach().to(dtype).contiguous().numpy()
+
+
+class _Composite(torch.autograd.Function):
+    """[I, N, ·] per-image Gaussians → [I, H, W, F] accumulated features, with its backward."""
+
+    @staticmethod
+    def forward(ctx, means2d, conics, opacities, features, radii, order, counts, width, height):
+        dtype = features.dtype
+        arrays = [_numpy(t, dtype) for t in (means2d, conics, opacities, features, radii)]
+        order_np, counts_np = order.numpy(), counts.numpy()
+        num_images = means2d.shape[0]
+        out = np.empty((num_images, height, width, features.shape[-1]), arrays[0].dtype)
+        final_t = np.empty((num_images, height, width), np.float64)
+        last = np.empty((num_images, height, width), np.int64)
+        _forward(*arrays, order_np, counts_np, out, final_t, last)
+        ctx.arrays = (*arrays, order_np, counts_np, final_t, last)
+        return torch.from_numpy(out)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_out):
+        arrays = ctx.arrays
+        means2d, features = arrays[0], arrays[3]
+        chunks = numba.get_num_threads()
+        shape = (chunks, *means2d.shape[:2])
+        buffers = [
+            np.zeros((*shape, 2), means2d.dtype),
+            np.zeros((*shape, 3), means2d.dtype),
+            np.zeros(shape, means2d.dtype),
+            np.zeros((*shape, features.shape[2]), means2d.dtype),
+        ]
+        grad = grad_out.detach().to(torch.from_numpy(features).dtype).contiguous().numpy()
+        _backward(*arrays, grad, *buffers)
+        grads = [torch.from_numpy(b.sum(axis=0)) for b in buffers]
+        return (*grads, None, None, None, None, None)
+
+
+def rasterize_numba(
+    means: Tensor,  # [..., N, 3] world frame, metres
+    quats: Tensor,  # [..., N, 4] wxyz rotations, normalised here
+    scales: Tensor,  # [..., N, 3] standard deviations, metres
+    opacities: Tensor,  # [..., N] in [0, 1]
+    colors: Tensor,  # [..., N, D]
+    world_to_cam: Tensor,  # [..., C, 4, 4] OpenCV convention
+    K: Tensor,  # [..., C, 3, 3] pixels
+    width: int,
+    height: int,
+    near_plane: float = 0.01,
+    eps2d: float = 0.3,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """:func:`torch_backend.rasterize_torch` with the compositing compiled: same inputs, outputs
+    (rgb ``[..., C, H, W, D]``, alpha and depth ``[..., C, H, W]``) and gradients; CPU tensors,
+    float32 or float64."""
+    if numba is None:
+        raise RuntimeError(
+            "the numba renderer needs numba (pip install numba); use backend='torch'"
+        )
+    if means.device.type != "cpu":
+        raise ValueError(f"the numba renderer runs on CPU tensors, got device {means.device}")
+    _check_shapes(means, quats, scales, opacities, colors, world_to_cam, K)
+    images = project_images(
+        means, quats, scales, opacities, colors, world_to_cam, K, width, height, near_plane, eps2d
+    )
+    with torch.no_grad():
+        visible = (images.radii > 0).all(dim=-1)
+        keys = torch.where(visible, images.depths, torch.full_like(images.depths, float("inf")))
+        order = torch.sort(keys, dim=-1, stable=True).indices.contiguous()  # front first
+        counts = visible.sum(dim=-1).to(torch.int64)
+    composited = _Composite.apply(
+        images.means2d,
+        images.conics,
+        images.opacities,
+        images.features,
+        images.radii,
+        order,
+        counts,
+        width,
+        height,
+    )
+    return images.split_outputs(composited)
