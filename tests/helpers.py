@@ -46,15 +46,15 @@ def make_tiny_dataset(folder, **overrides):
     return folder
 
 
-def train_tiny_gaussian_predictor(data, out, steps: int = 1):
-    """A 3DGS predictor trained ``steps`` steps on the test split of ``data`` (U-Net widths 8, 16):
+def train_tiny_gaussian_predictor(data, out, steps: int = 1, split: str = "test"):
+    """A 3DGS predictor trained ``steps`` steps on ``split`` of ``data`` (U-Net widths 8, 16):
     a model file for the code paths, not a useful model. Returns the output folder."""
     from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
 
     settings = GaussianTrainSettings(
         data=str(data),
         out=str(out),
-        split="test",
+        split=split,
         steps=steps,
         batch_size=1,
         predictor={"channels": [8, 16]},

@@ -7,6 +7,7 @@ objectives, the exported model, and the command's one-line errors.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from helpers import train_tiny_gaussian_predictor
 from safetensors.torch import load_file
 from typer.testing import CliRunner
 
@@ -248,6 +250,8 @@ def test_train_command_runs_resumes_and_logs(tmp_path):
         (["{tiny}", "train.steps=many"], "train.steps: expected an integer, got 'many'"),
         (["{tiny}", "data.source={tmp}/no"], "no [data.source]: dataset folder not found"),
         (["{tiny}", "data.generate.num_anchors=2"], "data.generate: --num-anchors: must be"),
+        (["{tiny}", "data.geometry=guessed"], "data.geometry: expected one of true, predicted"),
+        (["{tiny}", "data.gs_model=gs.safetensors"], "data.gs_model: a 3DGS predictor is only"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
@@ -290,3 +294,26 @@ def test_all_views_makes_each_view_its_own_video(tmp_path):
     assert not torch.equal(items[0]["frames"], items[1]["frames"])
     assert [four.sample_id(i).split("/")[-1] for i in range(4)] == [f"view{v}" for v in range(4)]
     assert four.fingerprint() != one.fingerprint()  # a resumed run cannot switch silently
+
+
+def test_predicted_geometry_trains_on_the_3dgs_predictors_assets(folder, tmp_path):
+    """data.geometry = predicted: each video's asset is what `predict` builds from its frame 0
+    with the frozen 3DGS predictor (built once per video), and a mixed step runs through it."""
+    gs_model = train_tiny_gaussian_predictor(folder, tmp_path / "gs", split="train")
+    config = tiny(
+        tmp_path / "out", f"data.source={folder}", "data.geometry=predicted",
+        f"data.gs_model={gs_model}", "objective.kind=mixed", "train.steps=1",
+    )  # fmt: skip
+    samples = TrainingSamples(config.data)
+    item, truth = samples[1], samples.asset(1)
+    predicted = item["asset"]
+    assert samples[1]["asset"] is predicted  # cached, not rebuilt every epoch
+    assert predicted.num_anchors == truth.num_anchors  # the data's settings
+    assert predicted.gaussians.num_gaussians != truth.gaussians.num_gaussians
+    assert not torch.allclose(predicted.x0.mean(0), truth.x0.mean(0), atol=1e-4)
+    assert (predicted.x0.mean(0) - truth.x0.mean(0)).norm() < 0.3  # about where the object is
+    train(config, progress=False, log=lambda line: None)
+    record = read_log(tmp_path / "out")[1]
+    assert math.isfinite(record["photometric"]) and record["photometric"] > 0
+    meta = json.loads((tmp_path / "out" / "model.json").read_text())
+    assert meta["training"]["geometry"].startswith("predicted: the frozen 3DGS predictor")

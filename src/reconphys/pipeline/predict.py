@@ -96,6 +96,67 @@ def _given_gaussians(ply: Path, observation: Observation, placement: str):
     }
 
 
+def lifted_above(gaussians, ground_height: float):
+    """The Gaussians moved up just above ``ground_height`` (metres) where their lowest centre is
+    below it: an object must start above its ground."""
+    lowest = float(gaussians.means[:, 2].min())
+    if lowest >= ground_height:
+        return gaussians
+    return gaussians.with_means(
+        gaussians.means + torch.tensor([0.0, 0.0, ground_height - lowest + 1e-3])
+    )
+
+
+def physics_settings(
+    attributes: dict[str, float],
+    data: dict,  # a dataset's settings (anchors, springs, binding, contact), as in model.json
+    frame_dt: float,
+    ground_height: float,
+    object_id: str,
+    num_anchors: int | None = None,
+) -> PhysicsSettings:
+    """The settings of an asset built from new Gaussians: the attributes, and the spring-mass
+    settings of the data the physics network was trained on."""
+    return PhysicsSettings(
+        **attributes,
+        num_anchors=num_anchors or int(data.get("num_anchors", DEFAULT_NUM_ANCHORS)),
+        num_neighbors=int(data.get("num_neighbors", 32)),
+        binding_neighbors=int(data.get("binding_neighbors", 16)),
+        binding_power=float(data.get("binding_power", 2.0)),
+        spring_exponent=float(data.get("spring_exponent", 0.5)),
+        restitution=float(data.get("restitution", 0.0)),
+        substeps=int(data.get("min_substeps", 100)),
+        frame_dt=frame_dt,
+        ground_height=ground_height,
+        object_id=object_id,
+    )
+
+
+def feed_forward_asset(
+    observation: Observation, attributes: dict[str, float], data: dict, gs_model=None
+) -> Asset:
+    """What the feed-forward pipeline builds without a PLY: the 3DGS predictor's Gaussians from
+    frame 0, the initial linear velocity from the masks, anchors/springs/binding by the settings
+    ``data`` (see :func:`physics_settings`), on the camera's ground. Used to train the physics
+    network on predicted geometry (``data.geometry = "predicted"``)."""
+    from ..assets.build import build_asset
+
+    placed, _ = predicted_gaussians(observation, gs_model)
+    velocity = estimate_linear_velocity(
+        placed.means, observation.masks, observation.camera, observation.frame_dt
+    )
+    ground_height = observation.camera.ground_height
+    physics = physics_settings(
+        attributes,
+        data,
+        observation.frame_dt,
+        ground_height,
+        f"predicted-{Path(observation.source).stem}",
+    )
+    placed = lifted_above(placed, ground_height)
+    return build_asset(placed, physics, linear_velocity=velocity.tolist())
+
+
 def predicted_gaussians(observation: Observation, gs_model=None):
     """Frame 0 → the 3DGS predictor's Gaussians on the object's pixels (world frame), and the
     model's path. ``gs_model``: a path, a loaded predictor, or None (the default one). The frame
@@ -286,11 +347,7 @@ def predict_observation(
             raise InputError("a dataset sample's ground is known (z = 0)", field="--ground")
         ground_height = landed
     if build_new:
-        lowest = float(placed.means[:, 2].min())
-        if lowest < ground_height:  # the object must start above its ground
-            placed = placed.with_means(
-                placed.means + torch.tensor([0.0, 0.0, ground_height - lowest + 1e-3])
-            )
+        placed = lifted_above(placed, ground_height)
     details["ground_height_m"] = round(ground_height, 4)
     timings["gaussians"] = time.perf_counter() - started
 
@@ -307,19 +364,13 @@ def predict_observation(
 
     started = time.perf_counter()
     if build_new:
-        data = _model_data_settings(predictor)
-        physics = PhysicsSettings(
-            **attributes,
-            num_anchors=num_anchors or int(data.get("num_anchors", DEFAULT_NUM_ANCHORS)),
-            num_neighbors=int(data.get("num_neighbors", 32)),
-            binding_neighbors=int(data.get("binding_neighbors", 16)),
-            binding_power=float(data.get("binding_power", 2.0)),
-            spring_exponent=float(data.get("spring_exponent", 0.5)),
-            restitution=float(data.get("restitution", 0.0)),
-            substeps=int(data.get("min_substeps", 100)),
-            frame_dt=observation.frame_dt,
-            ground_height=ground_height,
-            object_id=object_id,
+        physics = physics_settings(
+            attributes,
+            _model_data_settings(predictor),
+            observation.frame_dt,
+            ground_height,
+            object_id,
+            num_anchors,
         )
         asset = build_asset(placed, physics, linear_velocity=velocity.tolist())
     else:

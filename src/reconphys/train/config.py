@@ -43,6 +43,7 @@ SUPERVISED_TARGETS = ("attributes", "observables")  # train.objective.supervised
 SCHEDULES = ("cosine", "constant")
 AMP_DTYPES = ("bfloat16", "float16")
 SPLITS = ("train", "test", "all")
+GEOMETRIES = ("true", "predicted")
 DERIVED_MODEL_KEYS = {"num_frames": "data.frames", "resolution": "data.resolution"}
 
 
@@ -58,6 +59,8 @@ class DataConfig:
     resolution: int = 64  # predictor input, pixels (square; frames are resized to it)
     render_resolution: int = 0  # size of the photometric loss' renders, pixels (0: resolution)
     num_workers: int = 0  # DataLoader worker processes (0: load in the training process)
+    geometry: str = "true"  # true (the dataset's assets) or predicted (the frozen 3DGS predictor)
+    gs_model: str = ""  # geometry = predicted: a 3DGS predictor (.safetensors or run); "": shipped
 
     @property
     def loss_resolution(self) -> int:
@@ -408,6 +411,12 @@ def _validate(config: TrainConfig) -> None:
         f"must be 0 (= data.resolution) or ≥ 8 pixels, got {d.render_resolution}",
     )
     _require(d.num_workers >= 0, "data.num_workers", f"must be ≥ 0, got {d.num_workers}")
+    _choice(d.geometry, GEOMETRIES, "data.geometry")
+    _require(
+        d.geometry == "predicted" or not d.gs_model,
+        "data.gs_model",
+        "a 3DGS predictor is only used with data.geometry = predicted",
+    )
     _choice(m.encoder, tuple(sorted(ENCODERS)), "model.encoder")
     _require(
         all(c >= 1 for c in m.encoder_channels) and len(m.encoder_channels) >= 1,

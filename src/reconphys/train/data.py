@@ -35,6 +35,10 @@ from ..errors import InputError
 from .config import GENERATE, DataConfig
 
 GEOMETRY = "ground truth (the dataset's canonical Gaussians, anchors and springs)"
+PREDICTED_GEOMETRY = (
+    "predicted: the frozen 3DGS predictor {gs_model} on frame 0 of the input view, initial "
+    "velocity from the masks (as `predict` builds it)"
+)
 
 
 @dataclass
@@ -122,6 +126,15 @@ class TrainingSamples(Dataset):
         self.dataset = self.per_view[0]  # samples, assets and attributes (the same in every view)
         if len(self.dataset) == 0:
             raise InputError(f"no samples in split {config.split!r}", field="data.split")
+        self.gs_predictor = None
+        self.geometry = GEOMETRY
+        if config.geometry == "predicted":
+            from ..models.gaussian_shipped import load_gaussian_predictor
+
+            self.gs_predictor = load_gaussian_predictor(config.gs_model or None)
+            self.geometry = PREDICTED_GEOMETRY.format(gs_model=self.gs_predictor.path)
+            self._asset_attributes = self.medians()  # replaced by the objective's
+        self._predicted_assets: dict[int, Asset] = {}  # item index → asset (deterministic)
 
     def _check_frames(self, config: DataConfig) -> None:
         if config.frames > self.settings.num_frames:
@@ -154,15 +167,39 @@ class TrainingSamples(Dataset):
         spec = draw_sample(self.settings, obj.id, planned.index)
         return sample_asset(obj, spec, place(obj, spec), self.settings)
 
+    def predicted_asset(self, index: int, item: dict) -> Asset:
+        """Item ``index``'s asset from the frozen 3DGS predictor (``data.geometry = predicted``):
+        built once from frame 0 of its view, with the training medians as attributes (the
+        objective replaces them)."""
+        if index not in self._predicted_assets:
+            from ..capture.observation import stored_observation
+            from ..pipeline.predict import feed_forward_asset
+
+            observation = stored_observation(
+                item["frames"][0],
+                item["K"][0],
+                item["world_to_cam"][0],
+                self.settings.frame_dt,
+                self.sample_id(index),
+            )
+            self._predicted_assets[index] = feed_forward_asset(
+                observation, self._asset_attributes, self.settings.to_dict(), self.gs_predictor
+            )
+        return self._predicted_assets[index]
+
     def __getitem__(self, index: int) -> dict:
         item = self.per_view[index % len(self.views)][index // len(self.views)]
+        if self.gs_predictor is None:
+            asset = self.asset(index)
+        else:
+            asset = self.predicted_asset(index, item)
         return {
             "frames": item["frames"],
             "K": item["K"],
             "world_to_cam": item["world_to_cam"],
             "attributes": item["attributes"],
             "id": self.sample_id(index),
-            "asset": self.asset(index),
+            "asset": asset,
         }
 
     def true_attributes(self) -> list[dict[str, float]]:

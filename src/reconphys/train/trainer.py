@@ -54,7 +54,7 @@ from ..threads import set_cpu_threads
 from . import distributed
 from .checkpoint import CHECKPOINT, load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from .config import TrainConfig, differing_keys
-from .data import GEOMETRY, Batch, StepSampler, TrainingSamples, collate
+from .data import Batch, StepSampler, TrainingSamples, collate
 from .objective import SceneBatch, photometric_loss, supervised_loss
 
 LOG = "log.jsonl"
@@ -294,7 +294,7 @@ class Trainer:
             "steps": self.step,
             "batch_size": c.train.batch_size,
             "skipped_steps": self.skipped,
-            "geometry": GEOMETRY,
+            "geometry": d.geometry,
             "init": self.init_source,
             "data": {
                 "source": d.source,
