@@ -41,38 +41,61 @@ try:  # Numba is optional: the torch renderer is used wherever it is missing.
 except ImportError:  # pragma: no cover - depends on the machine
     numba = None
 
-TILE = 16  # pixels per tile side
-
 
 def numba_available() -> bool:
     return numba is not None
 
 
-def _tile_list_py(means2d, radii, order, count, image, x0, x1, y0, y1, ids):
-    """Fill ``ids`` with the depth-sorted Gaussians of ``image`` whose screen box holds the centre
-    of a pixel in columns [x0, x1) and rows [y0, y1); return how many there are."""
-    m = 0
-    for r in range(count):
-        g = order[image, r]
-        mx = means2d[image, g, 0]
-        my = means2d[image, g, 1]
-        rx = radii[image, g, 0]
-        ry = radii[image, g, 1]
-        if (
-            mx + rx >= x0 + 0.5
-            and mx - rx <= x1 - 0.5
-            and my + ry >= y0 + 0.5
-            and my - ry <= y1 - 0.5
-        ):
-            ids[m] = g
-            m += 1
-    return m
+TILE = 8  # pixels per tile side: small tiles keep the per-pixel lists short
 
 
-def _gaussian_at_py(means2d, conics, opacities, image, g, px, py):
-    """(dx, dy, vis, alpha) of Gaussian g at pixel centre (px, py): vis = exp(−power)."""
+def _tile_range_py(centre, radius, size):
+    """First and last tile (inclusive) along one axis whose pixel centres the box [centre ±
+    radius] holds (last < first: none)."""
+    first = max(0, int(np.ceil(centre - radius - 0.5)))
+    last = min(size - 1, int(np.floor(centre + radius - 0.5)))
+    if last < first:
+        return 0, -1
+    return first // TILE, last // TILE
+
+
+def _count_py(means2d, radii, order, counts, width, height, per_tile):
+    """per_tile [I, tiles]: how many Gaussians each tile lists."""
+    tiles_x = (width + TILE - 1) // TILE
+    for image in numba.prange(means2d.shape[0]):
+        for r in range(counts[image]):
+            g = order[image, r]
+            tx0, tx1 = _tile_range(means2d[image, g, 0], radii[image, g, 0], width)
+            ty0, ty1 = _tile_range(means2d[image, g, 1], radii[image, g, 1], height)
+            for ty in range(ty0, ty1 + 1):
+                for tx in range(tx0, tx1 + 1):
+                    per_tile[image, ty * tiles_x + tx] += 1
+
+
+def _fill_py(means2d, radii, order, counts, width, height, offsets, ids):
+    """ids[offsets[i, t] : offsets[i, t + 1]] = the depth-sorted Gaussians of tile t of image i
+    (those whose screen box holds one of its pixel centres)."""
+    tiles_x = (width + TILE - 1) // TILE
+    for image in numba.prange(means2d.shape[0]):
+        cursor = offsets[image, :-1].copy()
+        for r in range(counts[image]):
+            g = order[image, r]
+            tx0, tx1 = _tile_range(means2d[image, g, 0], radii[image, g, 0], width)
+            ty0, ty1 = _tile_range(means2d[image, g, 1], radii[image, g, 1], height)
+            for ty in range(ty0, ty1 + 1):
+                for tx in range(tx0, tx1 + 1):
+                    t = ty * tiles_x + tx
+                    ids[cursor[t]] = g
+                    cursor[t] += 1
+
+
+def _gaussian_at_py(means2d, conics, opacities, radii, image, g, px, py):
+    """(dx, dy, vis, alpha) of Gaussian g at pixel centre (px, py): vis = exp(−power); alpha = 0
+    outside its screen box, where it is below 1/255 anyway (the box is drawn so)."""
     dx = px - means2d[image, g, 0]
     dy = py - means2d[image, g, 1]
+    if abs(dx) > radii[image, g, 0] or abs(dy) > radii[image, g, 1]:
+        return dx, dy, 0.0, 0.0
     power = 0.5 * conics[image, g, 0] * dx * dx + conics[image, g, 1] * dx * dy
     power += 0.5 * conics[image, g, 2] * dy * dy
     vis = np.exp(-power)
@@ -80,32 +103,27 @@ def _gaussian_at_py(means2d, conics, opacities, image, g, px, py):
     return dx, dy, vis, alpha
 
 
-def _forward_py(means2d, conics, opacities, features, radii, order, counts, out, final_t, last):
+def _forward_py(means2d, conics, opacities, features, radii, offsets, ids, out, final_t, last):
     """Composite every image: out [I, H, W, F], final_t [I, H, W] (float64), last [I, H, W]
     (how many entries of the pixel's tile list were walked, for the backward)."""
     num_images, height, width = out.shape[0], out.shape[1], out.shape[2]
     num_features = features.shape[2]
     tiles_x = (width + TILE - 1) // TILE
-    tiles_y = (height + TILE - 1) // TILE
-    tiles = tiles_x * tiles_y
+    tiles = tiles_x * ((height + TILE - 1) // TILE)
     for task in numba.prange(num_images * tiles):
-        image = task // tiles
-        ty = (task % tiles) // tiles_x
-        tx = task % tiles_x
-        x0, y0 = tx * TILE, ty * TILE
-        x1, y1 = min(x0 + TILE, width), min(y0 + TILE, height)
-        ids = np.empty(counts[image], np.int64)
-        m = _tile_list(means2d, radii, order, counts[image], image, x0, x1, y0, y1, ids)
+        image, t = task // tiles, task % tiles
+        x0, y0 = (t % tiles_x) * TILE, (t // tiles_x) * TILE
+        begin, end = offsets[image, t], offsets[image, t + 1]
         acc = np.zeros(num_features, np.float64)
-        for y in range(y0, y1):
-            for x in range(x0, x1):
+        for y in range(y0, min(y0 + TILE, height)):
+            for x in range(x0, min(x0 + TILE, width)):
                 acc[:] = 0.0
                 transmittance = 1.0
                 walked = 0
-                for r in range(m):
+                for r in range(begin, end):
                     g = ids[r]
                     _, _, _, alpha = _gaussian_at(
-                        means2d, conics, opacities, image, g, x + 0.5, y + 0.5
+                        means2d, conics, opacities, radii, image, g, x + 0.5, y + 0.5
                     )
                     if alpha < ALPHA_THRESHOLD:
                         continue
@@ -116,7 +134,7 @@ def _forward_py(means2d, conics, opacities, features, radii, order, counts, out,
                     for f in range(num_features):
                         acc[f] += weight * features[image, g, f]
                     transmittance = after
-                    walked = r + 1
+                    walked = r + 1 - begin
                 for f in range(num_features):
                     out[image, y, x, f] = acc[f]
                 final_t[image, y, x] = transmittance
@@ -124,37 +142,29 @@ def _forward_py(means2d, conics, opacities, features, radii, order, counts, out,
 
 
 def _backward_py(
-    means2d, conics, opacities, features, radii, order, counts, final_t, last, grad_out,
+    means2d, conics, opacities, features, radii, offsets, ids, final_t, last, grad_out,
     grad_means2d, grad_conics, grad_opacities, grad_features,
 ):  # fmt: skip
     """Accumulate the gradients of every image into the per-thread buffers grad_* [T, I, N, ·]."""
     num_images, height, width = grad_out.shape[0], grad_out.shape[1], grad_out.shape[2]
     num_features = features.shape[2]
     tiles_x = (width + TILE - 1) // TILE
-    tiles_y = (height + TILE - 1) // TILE
-    tiles = tiles_x * tiles_y
+    tiles = tiles_x * ((height + TILE - 1) // TILE)
     chunks = grad_means2d.shape[0]
     for c in numba.prange(chunks):
         behind = np.zeros(num_features, np.float64)
         for task in range(c, num_images * tiles, chunks):
-            image = task // tiles
-            ty = (task % tiles) // tiles_x
-            tx = task % tiles_x
-            x0, y0 = tx * TILE, ty * TILE
-            x1, y1 = min(x0 + TILE, width), min(y0 + TILE, height)
-            ids = np.empty(counts[image], np.int64)
-            m = _tile_list(means2d, radii, order, counts[image], image, x0, x1, y0, y1, ids)
-            if m == 0:
-                continue
-            for y in range(y0, y1):
-                for x in range(x0, x1):
-                    walked = last[image, y, x]
+            image, t = task // tiles, task % tiles
+            x0, y0 = (t % tiles_x) * TILE, (t // tiles_x) * TILE
+            begin = offsets[image, t]
+            for y in range(y0, min(y0 + TILE, height)):
+                for x in range(x0, min(x0 + TILE, width)):
                     transmittance = final_t[image, y, x]
                     behind[:] = 0.0
-                    for r in range(walked - 1, -1, -1):
+                    for r in range(begin + last[image, y, x] - 1, begin - 1, -1):
                         g = ids[r]
                         dx, dy, vis, alpha = _gaussian_at(
-                            means2d, conics, opacities, image, g, x + 0.5, y + 0.5
+                            means2d, conics, opacities, radii, image, g, x + 0.5, y + 0.5
                         )
                         if alpha < ALPHA_THRESHOLD:
                             continue
@@ -186,10 +196,26 @@ def _backward_py(
 
 
 if numba is not None:
-    _tile_list = numba.njit(cache=True, inline="always")(_tile_list_py)
+    _tile_range = numba.njit(cache=True, inline="always")(_tile_range_py)
     _gaussian_at = numba.njit(cache=True, inline="always")(_gaussian_at_py)
+    _count = numba.njit(parallel=True, cache=True)(_count_py)
+    _fill = numba.njit(parallel=True, cache=True)(_fill_py)
     _forward = numba.njit(parallel=True, cache=True)(_forward_py)
     _backward = numba.njit(parallel=True, cache=True)(_backward_py)
+
+
+def _tile_lists(means2d, radii, order, counts, width, height) -> tuple[np.ndarray, np.ndarray]:
+    """Per image and tile, the depth-sorted Gaussians that may touch it (CSR: offsets, ids)."""
+    tiles = ((width + TILE - 1) // TILE) * ((height + TILE - 1) // TILE)
+    per_tile = np.zeros((means2d.shape[0], tiles), np.int64)
+    _count(means2d, radii, order, counts, width, height, per_tile)
+    ends = np.cumsum(per_tile.reshape(-1))
+    offsets = np.zeros((means2d.shape[0], tiles + 1), np.int64)
+    offsets[:, 1:] = ends.reshape(per_tile.shape)
+    offsets[1:, 0] = ends.reshape(per_tile.shape)[:-1, -1]
+    ids = np.empty(int(ends[-1]) if ends.size else 0, np.int64)
+    _fill(means2d, radii, order, counts, width, height, offsets, ids)
+    return offsets, ids
 
 
 def _numpy(t: Tensor, dtype: torch.dtype) -> np.ndarray:
@@ -203,13 +229,13 @@ class _Composite(torch.autograd.Function):
     def forward(ctx, means2d, conics, opacities, features, radii, order, counts, width, height):
         dtype = features.dtype
         arrays = [_numpy(t, dtype) for t in (means2d, conics, opacities, features, radii)]
-        order_np, counts_np = order.numpy(), counts.numpy()
+        lists = _tile_lists(arrays[0], arrays[4], order.numpy(), counts.numpy(), width, height)
         num_images = means2d.shape[0]
         out = np.empty((num_images, height, width, features.shape[-1]), arrays[0].dtype)
         final_t = np.empty((num_images, height, width), np.float64)
         last = np.empty((num_images, height, width), np.int64)
-        _forward(*arrays, order_np, counts_np, out, final_t, last)
-        ctx.arrays = (*arrays, order_np, counts_np, final_t, last)
+        _forward(*arrays, *lists, out, final_t, last)
+        ctx.arrays = (*arrays, *lists, final_t, last)
         return torch.from_numpy(out)
 
     @staticmethod
