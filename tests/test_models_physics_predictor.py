@@ -12,6 +12,7 @@ from reconphys.models.physics_predictor import (
     PredictorConfig,
     attributes_from_unit,
     normalize_attributes,
+    silhouette_statistics,
 )
 from reconphys.physics.model import ATTRIBUTE_RANGES
 
@@ -98,3 +99,54 @@ def test_coordinate_channels_make_pooled_features_see_position():
     assert (c[0] - c[1]).abs().max() > 1e-3
     with pytest.raises(ValueError, match="coords"):
         PhysicsPredictor(PredictorConfig(extra={"colour": True}))
+
+
+def test_silhouette_statistics_match_numpy_moments():
+    """A lit rectangle on black: area, centroid and central moments of its pixel coordinates
+    (numpy, in [−1, 1]); moving it 3 px moves only the centroid, by 3 pixel pitches."""
+    import numpy as np
+
+    h, w = 24, 32
+    frames = torch.zeros(1, 3, h, w, 3, dtype=torch.float64)
+    frames[0, 0, 5:12, 4:15] = torch.tensor([0.8, 0.3, 0.1], dtype=torch.float64)
+    frames[0, 1, 5:12, 7:18] = 0.5  # the same rectangle 3 px to the right
+    stats = silhouette_statistics(frames)[0]
+    ys, xs = np.meshgrid(np.linspace(-1, 1, h)[5:12], np.linspace(-1, 1, w)[4:15], indexing="ij")
+    expected = [
+        xs.size / (h * w), xs.mean(), ys.mean(), xs.var(), ys.var(),
+        ((xs - xs.mean()) * (ys - ys.mean())).mean(),
+    ]  # fmt: skip
+    np.testing.assert_allclose(stats[0].numpy(), expected, rtol=1e-12, atol=1e-15)
+    moved = stats[1] - stats[0]
+    np.testing.assert_allclose(moved.numpy(), [0, 3 * 2 / (w - 1), 0, 0, 0, 0], atol=1e-12)
+    assert (stats[2] == 0).all()  # an empty frame
+
+
+def test_silhouette_statistics_weigh_edge_pixels_by_coverage():
+    """A dim edge column (half the object level) pulls the centroid half as much as a lit one."""
+    frames = torch.zeros(1, 2, 8, 9, 3, dtype=torch.float64)
+    frames[0, :, 2:6, 3:5] = 1.0
+    frames[0, 0, 2:6, 5] = 0.025  # half of OBJECT_LEVEL: weight 0.5
+    frames[0, 1, 2:6, 5] = 1.0
+    cx = silhouette_statistics(frames)[0, :, 1]
+    pitch = 2 / 8
+    x = torch.linspace(-1, 1, 9, dtype=torch.float64)
+    assert cx[0].item() == pytest.approx(((x[3] + x[4] + 0.5 * x[5]) / 2.5).item())
+    assert cx[1].item() == pytest.approx((x[4]).item()) and x[5] - x[4] == pytest.approx(pitch)
+
+
+def test_silhouette_branch_is_optional_and_trained():
+    """model.silhouette adds the branch; its weights get a gradient; old configs load without."""
+    torch.manual_seed(0)
+    config = PredictorConfig(**{**TINY.to_dict(), "silhouette": True})
+    model = PhysicsPredictor(config)
+    frames = torch.zeros(2, 4, 32, 32, 3)  # fewer frames than num_frames (6)
+    frames[0, :, 10:20, 10:20] = 0.7
+    frames[1, :, 12:22, 8:18] = 0.7
+    out = model(frames)
+    out["unit"].sum().backward()
+    assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in model.silhouette.parameters())
+    assert not torch.allclose(out["unit"][0], out["unit"][1])
+    legacy = {k: v for k, v in TINY.to_dict().items() if k != "silhouette"}
+    assert PredictorConfig.from_dict(legacy).silhouette is False
+    assert PhysicsPredictor(PredictorConfig.from_dict(legacy)).silhouette is None

@@ -41,6 +41,7 @@ class PredictorConfig:
     num_frames: int = 20  # frames the predictor reads (frames 0..num_frames-1)
     resolution: int = 64  # square input size in pixels
     extra: dict = field(default_factory=dict)  # encoder-specific options
+    silhouette: bool = False  # add the silhouette-statistics branch (SilhouetteBranch)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -163,6 +164,66 @@ class TemporalAttention(nn.Module):
         return x + self.mlp(self.norm2(x))
 
 
+# --- silhouette statistics ------------------------------------------------------------------
+
+SILHOUETTE_STATS = 6  # area, centroid x, y, second central moments xx, yy, xy
+OBJECT_LEVEL = 0.05  # a pixel whose brightest channel reaches this is all object (black backdrop)
+
+
+def silhouette_statistics(
+    frames: Tensor,  # [B, T, H, W, 3] in [0, 1], the object on a black backdrop
+) -> Tensor:  # [B, T, 6]
+    """Per frame: the object's area (fraction of the image), centroid (x, y) and second central
+    moments (xx, yy, xy), pixel coordinates in [−1, 1] (x right, y down). Each pixel weighs
+    ``min(1, brightest channel / 0.05)``, so edge pixels count by their coverage and the centroid
+    moves by fractions of a pixel. An empty frame gives zeros."""
+    h, w = frames.shape[2:4]
+    weight = (frames.amax(-1) / OBJECT_LEVEL).clamp(0, 1)  # [B, T, H, W]
+    y = torch.linspace(-1, 1, h, device=frames.device, dtype=frames.dtype)[:, None]
+    x = torch.linspace(-1, 1, w, device=frames.device, dtype=frames.dtype)[None, :]
+    total = weight.sum((-2, -1))
+    safe = total.clamp_min(1e-6)
+    cx = (weight * x).sum((-2, -1)) / safe
+    cy = (weight * y).sum((-2, -1)) / safe
+    dx = x - cx[..., None, None]
+    dy = y - cy[..., None, None]
+    xx = (weight * dx * dx).sum((-2, -1)) / safe
+    yy = (weight * dy * dy).sum((-2, -1)) / safe
+    xy = (weight * dx * dy).sum((-2, -1)) / safe
+    stats = torch.stack([total / (h * w), cx, cy, xx, yy, xy], -1)
+    return stats * (total > 0)[..., None]
+
+
+class SilhouetteBranch(nn.Module):
+    """The whole sequence of silhouette statistics → a vector added to the pooled video features.
+
+    A CNN whose maps are averaged over space and time keeps little of *how far* the object moved
+    or *how much* it squashed and for how long: sub-pixel quantities at the 32-px size, yet exactly
+    what friction (sliding after contact) and damping (the decay of the squash) change. The branch
+    reads frame 0's statistics and every later frame's change from it (×10), flattened over
+    time, through an MLP. Fewer frames than ``num_frames`` repeat the last one.
+    """
+
+    def __init__(self, num_frames: int, channels: int, hidden: int = 128):
+        super().__init__()
+        self.num_frames = num_frames
+        self.mlp = nn.Sequential(
+            nn.Linear(num_frames * SILHOUETTE_STATS, hidden),
+            nn.GELU(),
+            nn.Linear(hidden, hidden),
+            nn.GELU(),
+            nn.Linear(hidden, channels),
+        )
+
+    def forward(self, frames: Tensor) -> Tensor:  # [B, T, H, W, 3] → [B, channels]
+        stats = silhouette_statistics(frames)
+        if stats.shape[1] < self.num_frames:
+            pad = stats[:, -1:].expand(-1, self.num_frames - stats.shape[1], -1)
+            stats = torch.cat([stats, pad], 1)
+        change = 10.0 * (stats[:, 1:] - stats[:, :1])
+        return self.mlp(torch.cat([stats[:, :1], change], 1).flatten(1))
+
+
 # --- attribute bounds -----------------------------------------------------------------------
 
 
@@ -225,6 +286,7 @@ class PhysicsPredictor(nn.Module):
         self.project = nn.Conv3d(self.encoder.out_channels, c, 1)
         self.trunk = nn.Sequential(*[Residual3d(c) for _ in range(config.trunk_blocks)])
         self.temporal = TemporalAttention(c, config.attention_heads, config.num_frames)
+        self.silhouette = SilhouetteBranch(config.num_frames, c) if config.silhouette else None
         layers, previous = [], c
         for width in config.mlp_hidden:
             layers += [nn.Linear(previous, width), nn.GELU()]
@@ -245,6 +307,8 @@ class PhysicsPredictor(nn.Module):
         features = features.reshape(b, t, *features.shape[1:]).transpose(1, 2)  # [B, C, T, h', w']
         tokens = self.trunk(self.project(features)).mean((-2, -1)).transpose(1, 2)  # [B, T, C]
         pooled = self.temporal(tokens).mean(1)
+        if self.silhouette is not None:
+            pooled = pooled + self.silhouette(frames)
         unit = torch.sigmoid(self.head(pooled))
         return {"unit": unit, **attributes_from_unit(unit)}
 
