@@ -2,7 +2,7 @@
 
 import pytest
 import torch
-from test_render_torch import F64, camera_at_origin, identity_quats, random_scene
+from test_render_torch import F64, camera_at_origin, gradcheck_inputs, identity_quats, random_scene
 
 from reconphys.assets.gaussians import Gaussians
 from reconphys.render import auto_backend, available_backends, dataset_views, render
@@ -84,14 +84,7 @@ def test_gradients_match_finite_differences():
     alpha between 2/255 and 0.9 (away from the cut-offs)."""
     width, height = 12, 10
     world_to_cam, K = camera_at_origin(F64, width, height, focal=10.0)
-    means = torch.tensor([[0.0, 0.0, 2.0], [0.2, -0.1, 2.5], [-0.15, 0.2, 3.0]], dtype=F64)
-    quats = torch.tensor(
-        [[1.0, 0.1, -0.2, 0.3], [0.9, -0.3, 0.2, 0.1], [0.7, 0.2, 0.4, -0.3]], dtype=F64
-    )
-    scales = torch.tensor([[0.6, 0.8, 0.7], [0.9, 0.7, 0.8], [1.0, 1.2, 0.9]], dtype=F64)
-    opacities = torch.tensor([0.5, 0.4, 0.6], dtype=F64)
-    colors = torch.tensor([[0.9, 0.2, 0.1], [0.1, 0.8, 0.3], [0.2, 0.3, 0.9]], dtype=F64)
-    inputs = [t.clone().requires_grad_(True) for t in (means, quats, scales, opacities, colors)]
+    inputs = gradcheck_inputs()
 
     def fn(*args):
         return rasterize_numba(*args, world_to_cam, K, width, height)

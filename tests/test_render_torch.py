@@ -213,10 +213,9 @@ def test_near_plane_culls_and_keeps_gradients_finite():
     assert rgb[..., 0].max() > 0.1
 
 
-def test_gradients_match_finite_differences():
-    """gradcheck in float64 on an 8×8 image, away from the 1/255, 0.999 and 1e-4 cut-offs."""
-    width = height = 8
-    world_to_cam, K = camera_at_origin(F64, width, height, focal=10.0)
+def gradcheck_inputs() -> list[torch.Tensor]:
+    """Three large, half-transparent Gaussians 2–3 m in front of a focal-10 camera (float64,
+    requiring grad): means, quats, scales, opacities, colors."""
     means = torch.tensor([[0.0, 0.0, 2.0], [0.2, -0.1, 2.5], [-0.15, 0.2, 3.0]], dtype=F64)
     quats = torch.tensor(
         [[1.0, 0.1, -0.2, 0.3], [0.9, -0.3, 0.2, 0.1], [0.7, 0.2, 0.4, -0.3]], dtype=F64
@@ -224,7 +223,14 @@ def test_gradients_match_finite_differences():
     scales = torch.tensor([[0.6, 0.8, 0.7], [0.9, 0.7, 0.8], [1.0, 1.2, 0.9]], dtype=F64)
     opacities = torch.tensor([0.5, 0.4, 0.6], dtype=F64)
     colors = torch.tensor([[0.9, 0.2, 0.1], [0.1, 0.8, 0.3], [0.2, 0.3, 0.9]], dtype=F64)
-    inputs = [t.clone().requires_grad_(True) for t in (means, quats, scales, opacities, colors)]
+    return [t.clone().requires_grad_(True) for t in (means, quats, scales, opacities, colors)]
+
+
+def test_gradients_match_finite_differences():
+    """gradcheck in float64 on an 8×8 image, away from the 1/255, 0.999 and 1e-4 cut-offs."""
+    width = height = 8
+    world_to_cam, K = camera_at_origin(F64, width, height, focal=10.0)
+    inputs = gradcheck_inputs()
 
     def fn(*args):
         return rasterize_torch(*args, world_to_cam, K, width, height, chunk_pixels=16)

@@ -236,6 +236,7 @@ class _Composite(torch.autograd.Function):
         last = np.empty((num_images, height, width), np.int64)
         _forward(*arrays, *lists, out, final_t, last)
         ctx.arrays = (*arrays, *lists, final_t, last)
+        ctx.dtype = dtype
         return torch.from_numpy(out)
 
     @staticmethod
@@ -251,7 +252,7 @@ class _Composite(torch.autograd.Function):
             np.zeros(shape, means2d.dtype),
             np.zeros((*shape, features.shape[2]), means2d.dtype),
         ]
-        grad = grad_out.detach().to(torch.from_numpy(features).dtype).contiguous().numpy()
+        grad = grad_out.detach().to(ctx.dtype).contiguous().numpy()
         _backward(*arrays, grad, *buffers)
         grads = [torch.from_numpy(b.sum(axis=0)) for b in buffers]
         return (*grads, None, None, None, None, None)
