@@ -141,8 +141,9 @@ def test_silhouette_branch_is_optional_and_trained():
     config = PredictorConfig(**{**TINY.to_dict(), "silhouette": True})
     model = PhysicsPredictor(config)
     frames = torch.zeros(2, 4, 32, 32, 3)  # fewer frames than num_frames (6)
-    frames[0, :, 10:20, 10:20] = 0.7
-    frames[1, :, 12:22, 8:18] = 0.7
+    for t in range(4):  # one square slides, the other squashes
+        frames[0, t, 10:20, 10 + t : 20 + t] = 0.7
+        frames[1, t, 12 + t : 22, 8 - t : 18 + t] = 0.7
     out = model(frames)
     out["unit"].sum().backward()
     assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in model.silhouette.parameters())

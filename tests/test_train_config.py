@@ -124,6 +124,12 @@ def test_resume_compares_everything_but_the_free_keys():
     assert differing_keys(a, b) == []
     c = apply_overrides(TrainConfig(), ["optim.lr=1e-3", "data.generate.objects=2"]).to_dict()
     assert differing_keys(a, c) == ["data.generate", "optim.lr"]
+    # A checkpoint written before a key existed matches a config at the key's default only.
+    older = TrainConfig().to_dict()
+    del older["model"]["silhouette"]
+    assert differing_keys(older, a) == []
+    d = apply_overrides(TrainConfig(), ["model.silhouette=true"]).to_dict()
+    assert differing_keys(older, d) == ["model.silhouette"]
 
 
 def test_data_order_is_a_function_of_seed_and_step():

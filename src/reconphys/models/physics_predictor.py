@@ -194,34 +194,56 @@ def silhouette_statistics(
     return stats * (total > 0)[..., None]
 
 
+def silhouette_motion(
+    stats: Tensor,  # [B, T, 6] silhouette_statistics
+) -> Tensor:  # [B, T, 12]
+    """How the silhouette changes, in units of the object's own size, and how fast: per frame the
+    change since frame 0 of the area (relative), the centroid (over the frame-0 radius of
+    gyration) and the second moments (relative to frame 0's), then their frame-to-frame
+    differences (0 at frame 0). No absolute shape or position: what it shows is motion."""
+    area0, xx0, yy0, xy0 = stats[:, :1, 0], stats[:, :1, 3], stats[:, :1, 4], stats[:, :1, 5]
+    spread = (xx0 + yy0).clamp_min(1e-6)
+    radius = spread.sqrt()
+    change = torch.stack(
+        [
+            stats[..., 0] / area0.clamp_min(1e-6) - 1,
+            (stats[..., 1] - stats[:, :1, 1]) / radius,
+            (stats[..., 2] - stats[:, :1, 2]) / radius,
+            stats[..., 3] / xx0.clamp_min(1e-6) - 1,
+            stats[..., 4] / yy0.clamp_min(1e-6) - 1,
+            (stats[..., 5] - xy0) / spread,
+        ],
+        -1,
+    ) * (area0[..., None] > 0)
+    speed = torch.cat([torch.zeros_like(change[:, :1]), change.diff(dim=1)], 1)
+    return torch.cat([change, speed], -1)
+
+
 class SilhouetteBranch(nn.Module):
-    """The whole sequence of silhouette statistics → a vector added to the pooled video features.
+    """The silhouette's motion over the video → a vector added to the pooled video features.
 
     A CNN whose maps are averaged over space and time keeps little of *how far* the object moved
     or *how much* it squashed and for how long: sub-pixel quantities at the 32-px size, yet exactly
     what friction (sliding after contact) and damping (the decay of the squash) change. The branch
-    reads frame 0's statistics and every later frame's change from it (×10), flattened over
-    time, through an MLP. Fewer frames than ``num_frames`` repeat the last one.
+    reads :func:`silhouette_motion` (no absolute shape, so it cannot learn objects by heart)
+    with two temporal convolutions, pooled by mean and max over time (the contact frame varies
+    from video to video), and a linear map to the trunk's width.
     """
 
-    def __init__(self, num_frames: int, channels: int, hidden: int = 128):
+    def __init__(self, channels: int, hidden: int = 32):
         super().__init__()
-        self.num_frames = num_frames
-        self.mlp = nn.Sequential(
-            nn.Linear(num_frames * SILHOUETTE_STATS, hidden),
+        self.conv = nn.Sequential(
+            nn.Conv1d(2 * SILHOUETTE_STATS, hidden, 3, padding=1),
             nn.GELU(),
-            nn.Linear(hidden, hidden),
+            nn.Conv1d(hidden, hidden, 3, padding=1),
             nn.GELU(),
-            nn.Linear(hidden, channels),
         )
+        self.out = nn.Linear(2 * hidden, channels)
 
     def forward(self, frames: Tensor) -> Tensor:  # [B, T, H, W, 3] → [B, channels]
-        stats = silhouette_statistics(frames)
-        if stats.shape[1] < self.num_frames:
-            pad = stats[:, -1:].expand(-1, self.num_frames - stats.shape[1], -1)
-            stats = torch.cat([stats, pad], 1)
-        change = 10.0 * (stats[:, 1:] - stats[:, :1])
-        return self.mlp(torch.cat([stats[:, :1], change], 1).flatten(1))
+        motion = silhouette_motion(silhouette_statistics(frames)).transpose(1, 2)  # [B, 12, T]
+        features = self.conv(motion)
+        return self.out(torch.cat([features.mean(-1), features.amax(-1)], -1))
 
 
 # --- attribute bounds -----------------------------------------------------------------------
@@ -286,7 +308,7 @@ class PhysicsPredictor(nn.Module):
         self.project = nn.Conv3d(self.encoder.out_channels, c, 1)
         self.trunk = nn.Sequential(*[Residual3d(c) for _ in range(config.trunk_blocks)])
         self.temporal = TemporalAttention(c, config.attention_heads, config.num_frames)
-        self.silhouette = SilhouetteBranch(config.num_frames, c) if config.silhouette else None
+        self.silhouette = SilhouetteBranch(c) if config.silhouette else None
         layers, previous = [], c
         for width in config.mlp_hidden:
             layers += [nn.Linear(previous, width), nn.GELU()]

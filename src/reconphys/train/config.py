@@ -478,7 +478,9 @@ RESUME_FREE_KEYS = (
 
 
 def differing_keys(old: dict, new: dict) -> list[str]:
-    """Dotted keys whose values differ between two ``to_dict()`` configs (free keys excluded)."""
+    """Dotted keys whose values differ between two ``to_dict()`` configs (free keys excluded).
+    A key missing from one side counts as its default (a checkpoint written before the key
+    existed)."""
 
     def flat(table, prefix=""):
         out = {}
@@ -490,6 +492,11 @@ def differing_keys(old: dict, new: dict) -> list[str]:
                 out[dotted] = value
         return out
 
+    defaults = flat(TrainConfig().to_dict())
     a, b = flat(old), flat(new)
     keys = sorted(set(a) | set(b))
-    return [k for k in keys if k not in RESUME_FREE_KEYS and a.get(k) != b.get(k)]
+    return [
+        k
+        for k in keys
+        if k not in RESUME_FREE_KEYS and a.get(k, defaults.get(k)) != b.get(k, defaults.get(k))
+    ]
