@@ -90,6 +90,7 @@ def photometric_loss(
     window: int = 1,  # frames between detaches of the simulated state
     frame_dt: float = 0.03,
     min_substeps: int = 100,
+    backend: str = "auto",  # the renderer (reconphys.render.render)
 ) -> Tensor:  # scalar
     """Mean squared photometric error of the self-forced rollout over frames 1..T−1."""
     if window < 1:
@@ -113,7 +114,7 @@ def photometric_loss(
                 g.means, scenes.x0[b], state.x[b], asset.binding_index, asset.binding_weight
             )
             camera = Cameras(cameras.K[b : b + 1], cameras.world_to_cam[b : b + 1], width, height)
-            image = render(g.with_means(means), camera).rgb[0]
+            image = render(g.with_means(means), camera, backend=backend).rgb[0]
             losses.append(F.mse_loss(image, frames[b, t]))
     return torch.stack(losses).mean()
 
