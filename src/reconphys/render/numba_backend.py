@@ -5,11 +5,14 @@ the per-pixel front-to-back compositing, which costs almost all of the torch ren
 CPU (dense [pixels × Gaussians] tensors, a cumulative sum and their autograd), runs here as
 compiled loops with a hand-written backward, the way gsplat's CUDA kernels do it:
 
-- forward: the image is cut into 16 × 16 tiles; each tile lists the depth-sorted Gaussians whose
-  screen box contains one of its pixel centres; each pixel walks its tile's list front to back
-  with the rules of the torch reference (``alpha = min(0.999, o · exp(−power))``, skip
-  ``alpha < 1/255``, stop before the transmittance would reach ``≤ 1e-4``) and keeps its final
-  transmittance and how far along the list it got;
+- binning: the image is cut into 8 × 8 tiles; each tile lists the depth-sorted Gaussians whose
+  screen box holds one of its pixel centres (counted, prefix-summed and filled per image: CSR
+  lists in depth order, the same culling as the reference's tiles);
+- forward: each pixel walks its tile's list front to back with the rules of the torch reference
+  (``alpha = min(0.999, o · exp(−power))``, skip ``alpha < 1/255``, stop before the
+  transmittance would reach ``≤ 1e-4``), skipping without an ``exp`` the Gaussians whose screen
+  box misses the pixel (their alpha is below 1/255 there by the box's construction), and keeps
+  its final transmittance and how far along the list it got;
 - backward: each pixel walks the same list back to front from where it stopped, recovering the
   transmittance before each Gaussian by division by ``1 − alpha`` (``alpha ≤ 0.999``) and the sum
   of what lies behind it, which gives ∂/∂alpha and from it the gradients of the 2D means, conics,
