@@ -252,6 +252,10 @@ def test_train_command_runs_resumes_and_logs(tmp_path):
         (["{tiny}", "data.generate.num_anchors=2"], "data.generate: --num-anchors: must be"),
         (["{tiny}", "data.geometry=guessed"], "data.geometry: expected one of true, predicted"),
         (["{tiny}", "data.gs_model=gs.safetensors"], "data.gs_model: a 3DGS predictor is only"),
+        (
+            ["{tiny}", "data.geometry=predicted", "data.gs_model={tmp}/gs.safetensors"],
+            "gs.safetensors: 3DGS predictor not found",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
