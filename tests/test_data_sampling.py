@@ -148,6 +148,10 @@ def test_settings_are_validated():
         make_settings(stiffness_range=(5.0, 1200.0))
     with pytest.raises(InputError, match="--objects"):
         make_settings(objects=0, test_objects=0)
+    with pytest.raises(InputError, match="--max-horizontal-speed"):
+        make_settings(max_horizontal_speed=-0.1)
+    with pytest.raises(InputError, match="--max-angular-speed"):
+        make_settings(max_angular_speed=float("nan"))
     paper = make_settings("paper")
     assert (paper.objects, paper.samples_per_object, paper.test_objects) == (450, 10, 46)
     assert (paper.test_samples_per_object, paper.resolution, paper.num_anchors) == (2, 512, 2048)

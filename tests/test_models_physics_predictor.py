@@ -11,6 +11,7 @@ from reconphys.models.physics_predictor import (
     PhysicsPredictor,
     PredictorConfig,
     attributes_from_unit,
+    motion_channels,
     normalize_attributes,
     silhouette_statistics,
 )
@@ -151,3 +152,38 @@ def test_silhouette_branch_is_optional_and_trained():
     legacy = {k: v for k, v in TINY.to_dict().items() if k != "silhouette"}
     assert PredictorConfig.from_dict(legacy).silhouette is False
     assert PhysicsPredictor(PredictorConfig.from_dict(legacy)).silhouette is None
+
+
+def test_motion_channels_are_the_frame_differences():
+    torch.manual_seed(3)
+    frames = torch.rand(2, 5, 8, 8, 3)
+    out = motion_channels(frames)
+    assert out.shape == (2, 5, 8, 8, 9)
+    torch.testing.assert_close(out[..., :3], frames)
+    assert not out[:, 0, ..., 3:].any()  # frame 0 has not changed
+    t = 3
+    torch.testing.assert_close(out[:, t, ..., 3:6], 4 * (frames[:, t] - frames[:, t - 1]))
+    torch.testing.assert_close(out[:, t, ..., 6:], 4 * (frames[:, t] - frames[:, 0]))
+
+
+def test_motion_option_feeds_the_encoder_and_loads_old_configs():
+    """model.motion: the first convolution reads 9 channels; its motion weights matter for a
+    moving video and not for a still one; other encoders refuse the option."""
+    torch.manual_seed(4)
+    model = PhysicsPredictor(PredictorConfig(**{**TINY.to_dict(), "motion": True})).eval()
+    first = model.encoder.layers[0]
+    assert first.in_channels == 9
+    moving = torch.zeros(1, 4, 32, 32, 3)
+    for t in range(4):
+        moving[0, t, 10:20, 10 + t : 20 + t] = 0.7
+    still = moving[:, -1:].expand(1, 4, 32, 32, 3)
+    with torch.no_grad():
+        before = [model(v)["unit"] for v in (moving, still)]
+        first.weight[:, 3:] = 0  # blind the encoder to the motion channels
+        after = [model(v)["unit"] for v in (moving, still)]
+    assert not torch.allclose(before[0], after[0])
+    torch.testing.assert_close(before[1], after[1])
+    legacy = {k: v for k, v in TINY.to_dict().items() if k != "motion"}
+    assert PredictorConfig.from_dict(legacy).motion is False
+    with pytest.raises(ValueError, match="motion"):
+        PhysicsPredictor(PredictorConfig(**{**TINY.to_dict(), "motion": True, "encoder": "timm"}))

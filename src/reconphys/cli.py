@@ -431,6 +431,10 @@ def make_data(
     neighbors: int = typer.Option(None, help="K nearest neighbours that make the springs."),
     min_substeps: int = typer.Option(None, help="Minimum substeps per frame."),
     distribution: str = typer.Option(None, help="Of m, k, d: uniform (paper) or log-uniform."),
+    max_horizontal_speed: float = typer.Option(
+        None, help="Initial horizontal speed bound per axis, m/s (default 0.3)."
+    ),
+    max_angular_speed: float = typer.Option(None, help="Initial spin bound, rad/s (default 2.0)."),
     seed: int = typer.Option(0, help="Dataset seed: object selection, splits, all samples."),
     workers: int = typer.Option(
         0, help="Worker processes (0: one per CPU core, one with --device cuda)."
@@ -467,6 +471,8 @@ def make_data(
         num_neighbors=neighbors,
         min_substeps=min_substeps,
         distribution=distribution,
+        max_horizontal_speed=max_horizontal_speed,
+        max_angular_speed=max_angular_speed,
         objaverse_uids=str(objaverse_uids.resolve()) if objaverse_uids else None,
     )
     report = make_dataset(

@@ -102,6 +102,14 @@ class DataSettings:
                 f"expected one of {', '.join(DISTRIBUTIONS)}, got {self.distribution!r}",
                 field="--distribution",
             )
+        for flag, name in (
+            ("--max-horizontal-speed", "max_horizontal_speed"),
+            ("--max-angular-speed", "max_angular_speed"),
+            ("max_vertical_speed", "max_vertical_speed"),
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise InputError(f"must be a number ≥ 0, got {value!r}", field=flag)
         for name in ("frame_dt", "size", "camera_radius", "camera_fov_deg"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):

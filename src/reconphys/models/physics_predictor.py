@@ -42,6 +42,7 @@ class PredictorConfig:
     resolution: int = 64  # square input size in pixels
     extra: dict = field(default_factory=dict)  # encoder-specific options
     silhouette: bool = False  # add the silhouette-statistics branch (SilhouetteBranch)
+    motion: bool = False  # feed the encoder each frame's change too (motion_channels; small_cnn)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -83,10 +84,10 @@ class SmallCNN(nn.Module):
     little about *where* the object is — e.g. how far it slides (friction).
     """
 
-    def __init__(self, channels: tuple[int, ...], coords: bool = False):
+    def __init__(self, channels: tuple[int, ...], coords: bool = False, in_channels: int = 3):
         super().__init__()
         self.coords = coords
-        layers, previous = [], 5 if coords else 3
+        layers, previous = [], in_channels + (2 if coords else 0)
         for c in channels:
             layers += [
                 nn.Conv2d(previous, c, 3, stride=2, padding=1),
@@ -115,7 +116,32 @@ def _small_cnn(config: PredictorConfig) -> nn.Module:
     unknown = set(config.extra) - {"coords"}
     if unknown:
         raise ValueError(f"extra: small_cnn takes only 'coords', got {sorted(unknown)}")
-    return SmallCNN(config.encoder_channels, coords=bool(config.extra.get("coords", False)))
+    return SmallCNN(
+        config.encoder_channels,
+        coords=bool(config.extra.get("coords", False)),
+        in_channels=3 * MOTION_CHANNEL_GROUPS if config.motion else 3,
+    )
+
+
+# --- motion channels ------------------------------------------------------------------------
+
+MOTION_CHANNEL_GROUPS = 3  # the frame, its change from the previous frame, its change from frame 0
+MOTION_GAIN = 4.0  # sub-pixel motion changes pixels by a few percent: bring it to the frame's scale
+
+
+def motion_channels(
+    frames: Tensor,  # [B, T, H, W, 3] in [0, 1]
+) -> Tensor:  # [B, T, H, W, 9]
+    """Each frame beside how it changed since the previous frame and since frame 0 (× 4).
+
+    A per-frame encoder that strides down to 4×4 maps keeps little of a sub-pixel slide or a
+    squash that decays over a few frames — what friction and damping change. Differencing at full
+    resolution before the encoder (a two-stream network's cheap motion stream) hands it those
+    changes directly. Frame 0's changes are zero."""
+    previous = torch.cat([frames[:, :1], frames[:, :-1]], 1)
+    return torch.cat(
+        [frames, MOTION_GAIN * (frames - previous), MOTION_GAIN * (frames - frames[:, :1])], -1
+    )
 
 
 # --- trunk ----------------------------------------------------------------------------------
@@ -303,6 +329,10 @@ class PhysicsPredictor(nn.Module):
         self.config = config = config or PredictorConfig()
         if config.encoder not in ENCODERS:
             raise ValueError(f"encoder: unknown {config.encoder!r}; known: {sorted(ENCODERS)}")
+        if config.motion and config.encoder != "small_cnn":
+            raise ValueError(
+                f"motion: only the small_cnn encoder reads motion channels, got {config.encoder!r}"
+            )
         self.encoder = ENCODERS[config.encoder](config)
         c = config.token_channels
         self.project = nn.Conv3d(self.encoder.out_channels, c, 1)
@@ -324,7 +354,8 @@ class PhysicsPredictor(nn.Module):
         b, t, h, w, _ = frames.shape
         if t > self.config.num_frames:
             raise ValueError(f"frames: at most {self.config.num_frames} frames, got {t}")
-        images = frames.reshape(b * t, h, w, 3).permute(0, 3, 1, 2)
+        pixels = motion_channels(frames) if self.config.motion else frames
+        images = pixels.reshape(b * t, h, w, pixels.shape[-1]).permute(0, 3, 1, 2)
         features = self.encoder(images)  # [B·T, C, h', w']
         features = features.reshape(b, t, *features.shape[1:]).transpose(1, 2)  # [B, C, T, h', w']
         tokens = self.trunk(self.project(features)).mean((-2, -1)).transpose(1, 2)  # [B, T, C]
