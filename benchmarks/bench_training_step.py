@@ -20,7 +20,7 @@ import torch
 from common import machine_description
 
 from reconphys.data.storage import read_manifest
-from reconphys.models.physics_predictor import ATTRIBUTE_ORDER
+from reconphys.physics import ATTRIBUTES
 from reconphys.render import Cameras, available_backends
 from reconphys.threads import set_cpu_threads
 from reconphys.train.config import DataConfig
@@ -37,7 +37,7 @@ def step_seconds(batch, backend: str, min_substeps: int, repeats: int) -> tuple[
     for _ in range(repeats):
         attributes = {
             name: batch.attributes[:, i].clone().requires_grad_(True)
-            for i, name in enumerate(ATTRIBUTE_ORDER)
+            for i, name in enumerate(ATTRIBUTES)
         }
         start = time.perf_counter()
         loss = photometric_loss(

@@ -18,8 +18,8 @@ import torch
 
 from reconphys.data.dataset import DropDataset
 from reconphys.eval.metrics import observable_attributes
-from reconphys.models.physics_predictor import ATTRIBUTE_ORDER
 from reconphys.models.shipped import load_predictor
+from reconphys.physics import ATTRIBUTES
 from reconphys.pipeline.model_input import predictor_frames
 from reconphys.threads import set_cpu_threads
 
@@ -40,13 +40,13 @@ def predict_split(model, root: str, split: str) -> tuple[torch.Tensor, torch.Ten
         frames = predictor_frames(item["frames"][0], item["K"][0], model.model.config.resolution)
         with torch.no_grad():
             out = model.model(frames)
-        predicted.append({n: out[n][0] for n in ATTRIBUTE_ORDER})
-        true.append(dict(zip(ATTRIBUTE_ORDER, item["attributes"], strict=True)))
+        predicted.append({n: out[n][0] for n in ATTRIBUTES})
+        true.append(dict(zip(ATTRIBUTES, item["attributes"], strict=True)))
     return observables(_stack(predicted)), observables(_stack(true))
 
 
 def _stack(rows: list[dict[str, torch.Tensor]]) -> dict[str, torch.Tensor]:
-    return {n: torch.stack([r[n] for r in rows]).double() for n in ATTRIBUTE_ORDER}
+    return {n: torch.stack([r[n] for r in rows]).double() for n in ATTRIBUTES}
 
 
 def main() -> None:

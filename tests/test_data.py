@@ -174,7 +174,7 @@ def test_manifest_lists_complete_samples_with_splits(reference):
         splits.setdefault(sample["object"], set()).add(sample["split"])
         assert storage.sample_is_complete(reference, sample["id"], SMALL)
     assert all(len(s) == 1 for s in splits.values())  # split by object
-    assert not list(reference.glob("*/.staging-*"))
+    assert not list(reference.glob("*/.*.staging-*"))
 
 
 def test_same_seed_gives_identical_files_whatever_the_workers(reference, tmp_path):
@@ -207,7 +207,7 @@ def test_interrupted_run_resumes_to_identical_files(reference, tmp_path):
     # What a kill in the middle of a sample leaves: a staging folder, and (disk trouble) a
     # sample folder with a file missing. Neither is accepted; both are redone.
     unwritten = next(s["id"] for s in manifest_of(reference)["samples"] if s["id"] not in written)
-    staging = out / "samples" / f".staging-{unwritten}-12345"
+    staging = out / "samples" / f".{unwritten}.staging-12345-abcd"
     staging.mkdir()
     (staging / "frames.npz").write_bytes(b"half")
     (out / "samples" / written[1] / "trajectory.npz").unlink()
@@ -327,7 +327,7 @@ def test_full_or_read_only_disk_is_a_clear_error_and_the_dataset_stays_valid(
     error = [line for line in result.output.splitlines() if line.startswith("error: ")]
     assert len(error) == 1 and "cannot write (No space left on device)" in error[0]
     assert str(out / "samples") in error[0]
-    assert not list(out.glob("*/.staging-*"))
+    assert not list(out.glob("*/.*.staging-*"))
     dataset = DropDataset(out, allow_incomplete=True)
     assert 0 < len(dataset) < 5 and dataset[0]["frames"].shape[0] == 4
 

@@ -233,7 +233,7 @@ def _assert_valid_dataset(out):
     dataset = DropDataset(out, allow_incomplete=True)  # every listed sample is complete
     for i in range(len(dataset)):
         assert dataset[i]["frames"].shape[0] == 4
-    assert not list(out.glob("*/.staging-*"))
+    assert not list(out.glob("*/.*.staging-*"))
 
 
 def test_empty_folder_is_a_clear_error(tmp_path):

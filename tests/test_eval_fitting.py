@@ -16,8 +16,8 @@ from reconphys.eval.methods.fitting import (
     triangulate,
     visual_hull,
 )
-from reconphys.eval.methods.springgaus import _rotations
 from reconphys.eval.plots import nice_ticks
+from reconphys.geometry import axis_angle_to_matrix
 from reconphys.render import dataset_views, render
 
 
@@ -66,7 +66,7 @@ def test_silhouette_centre_and_visual_hull_of_a_ball():
 
 def test_rotations_match_rodrigues_and_are_smooth_at_zero():
     vectors = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, math.pi / 2]], requires_grad=True)
-    rotations = _rotations(vectors)
+    rotations = axis_angle_to_matrix(vectors)
     assert torch.allclose(rotations[0], torch.eye(3), atol=1e-6)
     expected = torch.tensor([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     assert torch.allclose(rotations[1], expected, atol=1e-6)

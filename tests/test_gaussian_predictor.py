@@ -9,9 +9,9 @@ import pytest
 import torch
 from helpers import make_tiny_dataset
 
-from reconphys.assets.normalize import quaternion_multiply
 from reconphys.capture import default_camera
 from reconphys.capture.placement import project
+from reconphys.geometry import quaternion_multiply
 from reconphys.models.gaussian_predictor import (
     GaussianPredictor,
     GaussianPredictorConfig,

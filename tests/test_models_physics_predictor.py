@@ -6,7 +6,6 @@ import pytest
 import torch
 
 from reconphys.models.physics_predictor import (
-    ATTRIBUTE_ORDER,
     ENCODERS,
     PhysicsPredictor,
     PredictorConfig,
@@ -15,7 +14,7 @@ from reconphys.models.physics_predictor import (
     normalize_attributes,
     silhouette_statistics,
 )
-from reconphys.physics.model import ATTRIBUTE_RANGES
+from reconphys.physics.model import ATTRIBUTE_RANGES, ATTRIBUTES
 
 TINY = PredictorConfig(
     encoder_channels=(8, 16), token_channels=16, trunk_blocks=1, attention_heads=2,
@@ -29,7 +28,7 @@ def test_outputs_lie_in_the_attribute_ranges():
     frames = torch.rand(3, 6, 32, 32, 3)
     out = model(frames)
     assert out["unit"].shape == (3, 4)
-    for name in ATTRIBUTE_ORDER:
+    for name in ATTRIBUTES:
         low, high = ATTRIBUTE_RANGES[name]
         assert out[name].shape == (3,)
         assert (out[name] >= low).all() and (out[name] <= high).all(), name
@@ -37,7 +36,7 @@ def test_outputs_lie_in_the_attribute_ranges():
 
 def test_extreme_logits_reach_the_range_ends():
     ends = attributes_from_unit(torch.tensor([[0.0] * 4, [1.0] * 4], dtype=torch.float64))
-    for name in ATTRIBUTE_ORDER:
+    for name in ATTRIBUTES:
         low, high = ATTRIBUTE_RANGES[name]
         assert ends[name].tolist() == pytest.approx([low, high], rel=1e-12), name
 

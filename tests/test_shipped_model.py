@@ -16,8 +16,8 @@ import torch
 from reconphys.data.dataset import GeneratedDropDataset
 from reconphys.data.generate import dataset_cameras, generate_sample, render_views
 from reconphys.data.settings import make_settings
-from reconphys.models.physics_predictor import ATTRIBUTE_ORDER
 from reconphys.models.shipped import ENV_VAR, SHIPPED_PATH, load_predictor
+from reconphys.physics import ATTRIBUTES
 from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.render.video import to_uint8
 from reconphys.simulate import simulate_asset
@@ -37,7 +37,7 @@ def test_shipped_model_is_found_without_flags(model, monkeypatch):
     assert training["geometry"].startswith("ground truth")  # its scores are labelled †
     assert training["steps"] > 0 and training["skipped_steps"] == 0
     out = model.predict(torch.rand(3, model.num_frames, 48, 48, 3))
-    for name in ATTRIBUTE_ORDER:
+    for name in ATTRIBUTES:
         low, high = ATTRIBUTE_RANGES[name]
         assert torch.isfinite(out[name]).all()
         assert ((out[name] >= low) & (out[name] <= high)).all(), name

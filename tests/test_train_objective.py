@@ -9,7 +9,8 @@ import torch
 
 from reconphys.data.dataset import GeneratedDropDataset
 from reconphys.data.settings import make_settings
-from reconphys.models.physics_predictor import ATTRIBUTE_ORDER, PhysicsPredictor, PredictorConfig
+from reconphys.models.physics_predictor import PhysicsPredictor, PredictorConfig
+from reconphys.physics import ATTRIBUTES
 from reconphys.render import Cameras
 from reconphys.threads import set_cpu_threads
 from reconphys.train.objective import SceneBatch, photometric_loss, supervised_loss
@@ -80,7 +81,7 @@ def test_true_attributes_score_better_than_wrong_ones(tiny_batch):
     scenes, frames, cameras, true = _inputs(tiny_batch)
 
     def loss_of(values):
-        attributes = {n: values[:, i] for i, n in enumerate(ATTRIBUTE_ORDER)}
+        attributes = {n: values[:, i] for i, n in enumerate(ATTRIBUTES)}
         substeps = tiny_batch[0].min_substeps  # as the data was made
         return photometric_loss(
             attributes, scenes, frames, cameras, window=2, min_substeps=substeps
@@ -95,7 +96,7 @@ def test_true_attributes_score_better_than_wrong_ones(tiny_batch):
 
 def test_supervised_loss_is_zero_at_the_truth(tiny_batch):
     _, _, _, true = _inputs(tiny_batch)
-    attributes = {n: true[:, i] for i, n in enumerate(ATTRIBUTE_ORDER)}
+    attributes = {n: true[:, i] for i, n in enumerate(ATTRIBUTES)}
     assert supervised_loss(attributes, true).item() == pytest.approx(0.0, abs=1e-6)
     attributes["friction"] = attributes["friction"] * 0 + 0.5
     assert supervised_loss(attributes, true).item() > 0
@@ -108,7 +109,7 @@ def test_observable_target_ignores_the_unobservable_scale():
     true = torch.tensor([[0.5, 200.0, 1.0, 0.3], [2.0, 50.0, 0.4, 0.8]])
     scale = 1.5
     scaled = true * torch.tensor([scale, scale, scale, 1.0])
-    attributes = {n: scaled[:, i] for i, n in enumerate(ATTRIBUTE_ORDER)}
+    attributes = {n: scaled[:, i] for i, n in enumerate(ATTRIBUTES)}
     mass_width = math.log(6.0 / 0.2)
     expected = math.log(scale) / mass_width / 4
     observed = supervised_loss(attributes, true, "observables").item()
@@ -120,7 +121,7 @@ def test_observable_target_ignores_the_unobservable_scale():
 
 def test_window_must_be_positive(tiny_batch):
     scenes, frames, cameras, true = _inputs(tiny_batch)
-    attributes = {n: true[:, i] for i, n in enumerate(ATTRIBUTE_ORDER)}
+    attributes = {n: true[:, i] for i, n in enumerate(ATTRIBUTES)}
     with pytest.raises(ValueError, match="window"):
         photometric_loss(attributes, scenes, frames, cameras, window=0)
 
@@ -133,7 +134,7 @@ def test_padded_springs_change_nothing(tiny_batch):
     scenes, frames, cameras, true = _inputs(tiny_batch)
     first, second = scenes.assets
     fewer = replace(second, springs=second.springs[:-7], rest_length=second.rest_length[:-7])
-    attributes = {n: true[:, i].clone().requires_grad_(True) for i, n in enumerate(ATTRIBUTE_ORDER)}
+    attributes = {n: true[:, i].clone().requires_grad_(True) for i, n in enumerate(ATTRIBUTES)}
 
     def loss_of(assets, index):
         picked = {n: v[index] for n, v in attributes.items()}

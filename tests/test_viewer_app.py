@@ -11,7 +11,7 @@ import torch
 from test_viewer_session import make_small_asset
 
 from reconphys.assets.gaussians import Gaussians
-from reconphys.assets.normalize import rotation_to_quaternion
+from reconphys.geometry import matrix_to_quaternion
 from reconphys.render import dataset_views
 from reconphys.viewer import ViewerSession
 from reconphys.viewer.app import camera_from_viser, splat_arrays
@@ -21,7 +21,7 @@ def test_camera_from_viser_matches_the_dataset_view():
     view = dataset_views(64, 48)  # 40° vertical field of view
     world_to_cam = view.world_to_cam[1].double()
     cam_to_world = torch.linalg.inv(world_to_cam)
-    wxyz = rotation_to_quaternion(cam_to_world[:3, :3]).tolist()
+    wxyz = matrix_to_quaternion(cam_to_world[:3, :3]).tolist()
     camera = camera_from_viser(
         cam_to_world[:3, 3].tolist(), wxyz, fov=torch.pi * 40 / 180, aspect=64 / 48, height=48
     )

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
@@ -29,6 +28,7 @@ import numpy as np
 import torch
 
 from ..errors import InputError
+from ..io import atomic_file
 from .asset import Asset
 
 FORMATS = ("newton", "mjcf")
@@ -76,15 +76,8 @@ def _write_atomically(path: Path, write: Callable[[io.BufferedWriter], None]) ->
     path = Path(path)
     if path.is_dir():
         raise InputError("is a folder, expected a file name", source=str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_file(path) as tmp, open(tmp, "wb") as f:
+        write(f)
     return path
 
 

@@ -13,6 +13,7 @@ from torch import Tensor
 
 from reconphys.assets.gaussians import Gaussians
 from reconphys.errors import InputError
+from reconphys.geometry import matrix_to_quaternion, quaternion_multiply
 
 
 def bounding_box(means: Tensor) -> tuple[Tensor, Tensor]:  # means [..., N, 3] metres
@@ -51,59 +52,6 @@ def place_on_ground(g: Gaussians, height: float = 0.0) -> Gaussians:
     return replace(g, means=g.means + shift)
 
 
-def rotation_to_quaternion(rotation: Tensor) -> Tensor:  # rotation [..., 3, 3]
-    """Rotation matrices to unit quaternions ``[..., 4]`` (w, x, y, z) with ``w >= 0``.
-
-    Picks, per matrix, the best-conditioned of the four classic formulas (largest diagonal term),
-    so it is accurate for rotations near 180° too.
-    """
-    m = rotation
-    m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
-    m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
-    m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
-    # 4·q_i² for i = w, x, y, z
-    four_q_squared = torch.stack(
-        [
-            1.0 + m00 + m11 + m22,
-            1.0 + m00 - m11 - m22,
-            1.0 - m00 + m11 - m22,
-            1.0 - m00 - m11 + m22,
-        ],
-        dim=-1,
-    )
-    # Row i: 4·q_i·(w, x, y, z); divided by 4·q_i below.
-    candidates = torch.stack(
-        [
-            torch.stack([four_q_squared[..., 0], m21 - m12, m02 - m20, m10 - m01], dim=-1),
-            torch.stack([m21 - m12, four_q_squared[..., 1], m01 + m10, m02 + m20], dim=-1),
-            torch.stack([m02 - m20, m01 + m10, four_q_squared[..., 2], m12 + m21], dim=-1),
-            torch.stack([m10 - m01, m02 + m20, m12 + m21, four_q_squared[..., 3]], dim=-1),
-        ],
-        dim=-2,
-    )  # [..., 4, 4]
-    four_q = 2.0 * four_q_squared.clamp_min(1e-12).sqrt()  # [..., 4] = 4·|q_i|
-    best = four_q_squared.argmax(dim=-1, keepdim=True)  # [..., 1]
-    row = torch.gather(candidates, -2, best.unsqueeze(-1).expand(*best.shape, 4)).squeeze(-2)
-    quat = row / torch.gather(four_q, -1, best)
-    quat = torch.where(quat[..., :1] < 0, -quat, quat)
-    return quat / quat.norm(dim=-1, keepdim=True)
-
-
-def quaternion_multiply(a: Tensor, b: Tensor) -> Tensor:  # a, b [..., 4] wxyz
-    """Hamilton product ``a ⊗ b`` (rotation b first, then a), broadcasting, ``[..., 4]``."""
-    aw, ax, ay, az = a.unbind(-1)
-    bw, bx, by, bz = b.unbind(-1)
-    return torch.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        dim=-1,
-    )
-
-
 def rotate_gaussians(
     g: Gaussians,
     rotation: Tensor,  # [3, 3] or [..., 3, 3] proper rotation matrix (world ← object)
@@ -124,6 +72,6 @@ def rotate_gaussians(
     if orthogonality_error > 1e-4 or bool((torch.linalg.det(rotation) <= 0).any()):
         raise InputError("rotation must be orthonormal with determinant +1", field="rotation")
     means = g.means @ rotation.transpose(-1, -2)
-    rotation_quat = rotation_to_quaternion(rotation).unsqueeze(-2)  # [..., 1, 4]
+    rotation_quat = matrix_to_quaternion(rotation).unsqueeze(-2)  # [..., 1, 4]
     quats = quaternion_multiply(rotation_quat, g.quats)
     return replace(g, means=means, quats=quats)

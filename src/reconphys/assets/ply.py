@@ -17,7 +17,6 @@ plyfile dependency.
 from __future__ import annotations
 
 import os
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +24,7 @@ import torch
 
 from reconphys.assets.gaussians import Gaussians
 from reconphys.errors import InputError
+from reconphys.io import atomic_file
 
 # PLY scalar type names (both spellings) → numpy type codes without byte order.
 _PLY_TYPES = {
@@ -79,7 +79,7 @@ def write_ply(path: str | os.PathLike, gaussians: Gaussians) -> None:
 
     Values are stored as float32, so a float32 ``Gaussians`` round-trips bit-exactly through
     ``read_ply``. The file appears complete or not at all: it is written to a temporary file in the
-    same folder (created if missing) and moved into place with ``os.replace``.
+    same folder (created if missing) and renamed into place (:func:`reconphys.io.atomic_file`).
     Raises ``ValueError`` for batched or non-finite Gaussians (a file no reader would accept).
     """
     path = Path(path)
@@ -116,21 +116,10 @@ def write_ply(path: str | os.PathLike, gaussians: Gaussians) -> None:
             "end_header",
         ]
     )
-    _write_atomic(path, header.encode("ascii") + b"\n" + table.tobytes())
-
-
-def _write_atomic(path: Path, payload: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        with open(temporary, "xb") as f:  # honours the umask, unlike tempfile's 0600
-            f.write(payload)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(temporary, path)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
+    with atomic_file(path) as temporary, open(temporary, "wb") as f:
+        f.write(header.encode("ascii") + b"\n" + table.tobytes())
+        f.flush()
+        os.fsync(f.fileno())
 
 
 # --- reading ---

@@ -20,12 +20,12 @@ import json
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import torch
 from torch import Tensor
 
 from ..errors import InputError
+from ..io import atomic_file, read_json
 from ..render import Cameras
 
 
@@ -93,14 +93,7 @@ def _matrix(data: dict, key: str, shape: tuple[int, int], source: str) -> Tensor
 def read_camera(path: str | os.PathLike, width: int, height: int) -> CameraSpec:
     """The camera file at ``path`` for frames of ``width × height`` pixels (see module doc)."""
     source = str(path)
-    try:
-        data = json.loads(Path(path).read_text())
-    except OSError as e:
-        raise InputError(f"cannot read ({e.strerror or e})", source=source) from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"not valid JSON ({e})", source=source) from None
-    if not isinstance(data, dict):
-        raise InputError("expected a JSON object with K and world_to_cam", source=source)
+    data = read_json(path, expected="a JSON object with K and world_to_cam")
     K = _matrix(data, "K", (3, 3), source)
     world_to_cam = _matrix(data, "world_to_cam", (4, 4), source)
     if not (K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1 and K[2, :2].abs().sum() == 0):
@@ -130,4 +123,5 @@ def read_camera(path: str | os.PathLike, width: int, height: int) -> CameraSpec:
 
 
 def write_camera(path: str | os.PathLike, camera: CameraSpec) -> None:
-    Path(path).write_text(json.dumps(camera.to_json(), indent=1) + "\n")
+    with atomic_file(path) as tmp:
+        tmp.write_text(json.dumps(camera.to_json(), indent=1) + "\n")

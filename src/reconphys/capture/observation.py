@@ -22,6 +22,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
+from ..physics import ATTRIBUTES
 from .camera import CameraSpec, default_camera, read_camera
 from .masks import (
     alpha_masks,
@@ -106,7 +107,7 @@ def _dataset_observation(root: Path, sample: str, view: int) -> Observation:
             "asset": dataset.asset(index),
             "attributes": dict(
                 zip(
-                    ("mass", "stiffness", "damping", "friction"),
+                    ATTRIBUTES,
                     item["attributes"].tolist(),
                     strict=True,
                 )

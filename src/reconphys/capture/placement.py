@@ -19,9 +19,10 @@ import torch
 from torch import Tensor
 
 from ..assets.gaussians import Gaussians
+from ..physics import GRAVITY
 from .camera import CameraSpec
 
-GRAVITY = 9.8  # m/s², along −z (DESIGN §3)
+GRAVITY_MAGNITUDE = -GRAVITY[2]  # m/s², along −z (DESIGN §3)
 
 
 def project(points: Tensor, camera: CameraSpec) -> tuple[Tensor, Tensor]:
@@ -172,7 +173,7 @@ def estimate_linear_velocity(
     times = torch.tensor([t * frame_dt for t in used], dtype=torch.float64)
     offset = observed[0] - project(points.mean(0, keepdim=True), camera)[0][0]
     fall = torch.zeros(len(used), 3, dtype=torch.float64)
-    fall[:, 2] = -0.5 * GRAVITY * times**2
+    fall[:, 2] = -0.5 * GRAVITY_MAGNITUDE * times**2
 
     def residual(velocity: Tensor) -> Tensor:
         centres = points.mean(0) + times[:, None] * velocity + fall  # [F, 3]

@@ -31,15 +31,15 @@ from torch.utils.data import Dataset
 
 from ..assets.asset import Asset
 from ..errors import InputError
+from ..io import read_npz
+from ..physics import ATTRIBUTES
 from .generate import generate_sample
 from .objects import CanonicalObject, Placement, build_object, sample_asset
 from .plan import plan_objects, plan_samples
 from .sampling import SampleSpec
 from .settings import DataSettings
 from .sources import open_source
-from .storage import read_manifest, read_npz, read_object, read_sample_meta, sample_is_complete
-
-ATTRIBUTE_ORDER = ("mass", "stiffness", "damping", "friction")
+from .storage import read_manifest, read_object, read_sample_meta, sample_is_complete
 
 
 def _frame_range(frames, num_frames: int) -> list[int]:
@@ -92,7 +92,7 @@ def _item(
         "frames": images,
         "K": K,
         "world_to_cam": world_to_cam,
-        "attributes": torch.tensor([meta["attributes"][a] for a in ATTRIBUTE_ORDER]).float(),
+        "attributes": torch.tensor([meta["attributes"][a] for a in ATTRIBUTES]).float(),
         "anchors": torch.from_numpy(anchors[frame_index]),
         "x0": torch.from_numpy(anchors[0]),
         "v0": torch.from_numpy(velocities[0]),

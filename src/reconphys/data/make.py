@@ -20,6 +20,7 @@ from pathlib import Path
 import torch
 
 from ..errors import InputError
+from ..io import read_json, remove_stale_staging
 from ..threads import set_cpu_threads
 from .generate import generate_sample
 from .objects import CanonicalObject, build_object
@@ -29,14 +30,13 @@ from .sources import open_source
 from .storage import (
     MANIFEST,
     OBJECT_FORMAT,
+    VERSION,
     make_manifest,
     manifest_entry,
     object_is_complete,
-    read_json,
     read_manifest,
     read_object,
     read_sample_meta,
-    remove_stale_staging,
     sample_is_complete,
     shard_manifest_name,
     write_manifest,
@@ -176,9 +176,9 @@ def make_dataset(
     except OSError as e:
         raise InputError(f"cannot create ({e.strerror})", source=str(root)) from None
     for obj in objects:
-        remove_stale_staging(root / "objects", obj.key)
+        remove_stale_staging(root / "objects" / obj.key)
     for planned in samples:
-        remove_stale_staging(root / "samples", planned.id)
+        remove_stale_staging(root / "samples" / planned.id)
 
     entries: dict[str, dict] = {}
     for planned in samples:
@@ -190,7 +190,9 @@ def make_dataset(
         listed = []
         for obj in objects:
             path = root / "objects" / obj.key / "object.json"
-            description = read_json(path, OBJECT_FORMAT)["description"] if path.is_file() else {}
+            description = (
+                read_json(path, OBJECT_FORMAT, VERSION)["description"] if path.is_file() else {}
+            )
             listed.append(
                 {
                     "id": obj.ref.id,

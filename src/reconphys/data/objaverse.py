@@ -17,11 +17,11 @@ import gzip
 import json
 import os
 import shutil
-import tempfile
 import urllib.request
 from pathlib import Path
 
 from ..errors import InputError
+from ..io import atomic_file
 from .settings import DataSettings
 from .sources import ObjectRef, load_file_object
 
@@ -33,14 +33,11 @@ PREFIX = "objaverse/"
 
 def _download(url: str, target: Path) -> None:
     """Fetch ``url`` into ``target`` atomically (a killed download leaves no partial file)."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     try:
-        with os.fdopen(fd, "wb") as out, urllib.request.urlopen(url, timeout=60) as response:
-            shutil.copyfileobj(response, out)
-        os.replace(tmp, target)
+        with atomic_file(target) as tmp, open(tmp, "wb") as out:
+            with urllib.request.urlopen(url, timeout=60) as response:
+                shutil.copyfileobj(response, out)
     except OSError as e:
-        Path(tmp).unlink(missing_ok=True)
         raise InputError(f"download failed ({e})", source=url) from None
 
 

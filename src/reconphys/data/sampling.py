@@ -25,10 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..physics import seed_from_id
+from ..physics import GRAVITY, seed_from_id
 from .settings import DataSettings
 
 CONTACT_TOLERANCE = 1e-3  # metres: an anchor this close to the ground counts as touching it
+GRAVITY_MAGNITUDE = -GRAVITY[2]  # m/s², along −z
 TIME_GRID = 128  # samples of [0, t_c] on which the rotating object's lowest point is tracked
 
 
@@ -67,7 +68,11 @@ def _draw(rng: np.random.Generator, bounds: tuple[float, float], log: bool) -> f
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:  # [3, 3]
-    """Uniform random rotation (Shoemake: a normalised 4D Gaussian is a uniform unit quaternion)."""
+    """Uniform random rotation (Shoemake: a normalised 4D Gaussian is a uniform unit quaternion).
+
+    The matrix is :func:`reconphys.geometry.quaternion_to_matrix` written in numpy: the dataset a
+    seed makes must not change, even by round-off, so this numeric path stays as it is.
+    """
     q = rng.standard_normal(4)
     w, x, y, z = q / np.linalg.norm(q)
     return np.array(
@@ -93,7 +98,7 @@ def draw_sample(settings: DataSettings, object_id: str, sample_index: int) -> Sa
     angular = axis * rng.uniform(0.0, settings.max_angular_speed)
     horizontal = rng.uniform(-settings.max_horizontal_speed, settings.max_horizontal_speed, 2)
     t_c = float(rng.uniform(*settings.contact_frame_range)) * settings.frame_dt
-    fall = 0.5 * 9.8 * t_c * t_c  # free-fall distance in t_c from rest
+    fall = 0.5 * GRAVITY_MAGNITUDE * t_c * t_c  # free-fall distance in t_c from rest
     low, high = settings.drop_height_range
     v_max = settings.max_vertical_speed
     v_low, v_high = max(-v_max, (fall - high) / t_c), min(v_max, (fall - low) / t_c)
@@ -113,7 +118,11 @@ def draw_sample(settings: DataSettings, object_id: str, sample_index: int) -> Sa
 
 
 def axis_angle_matrices(rotation_vectors: np.ndarray) -> np.ndarray:  # [T, 3] → [T, 3, 3]
-    """Rodrigues' formula for rotation vectors (axis × angle in radians)."""
+    """Rodrigues' formula for rotation vectors (axis × angle in radians).
+
+    The numpy twin of :func:`reconphys.geometry.axis_angle_to_matrix` (which floors the angle
+    differently, for gradients), kept so that generated drop heights stay bit for bit the same.
+    """
     angle = np.linalg.norm(rotation_vectors, axis=-1, keepdims=True)
     axis = rotation_vectors / np.maximum(angle, 1e-12)
     x, y, z = axis[:, 0], axis[:, 1], axis[:, 2]
@@ -128,7 +137,7 @@ def centroid_height_for_contact(
     vertical_velocity: float,  # m/s
     angular_velocity: tuple[float, float, float],  # rad/s
     contact_time: float,  # s
-    gravity: float = 9.8,  # m/s²
+    gravity: float = GRAVITY_MAGNITUDE,  # m/s², along −z
 ) -> float:  # metres
     """Centroid height at t = 0 for which the rigidly moving object first touches z = 0 at
     ``contact_time``: the largest ½ g t² − v_z t − lowest(t) over t ∈ [0, t_c].

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset import ATTRIBUTE_ORDER
-from .storage import read_manifest, read_npz
+from ..io import read_npz
+from ..physics import ATTRIBUTES
+from .storage import read_manifest
 
 SHEET_TILE = 96  # pixels: small renders are enlarged (nearest neighbour) to at least this
 
@@ -28,13 +29,13 @@ def summary(root: Path) -> str:
         f"reconphys {manifest['package_version']}",
         "",
         f"{'split':<6} {'objects':>7} {'samples':>7}  "
-        + "  ".join(f"{a + ' min/median/max':<26}" for a in ATTRIBUTE_ORDER),
+        + "  ".join(f"{a + ' min/median/max':<26}" for a in ATTRIBUTES),
     ]
     for split in ("train", "test"):
         chosen = [s for s in samples if s["split"] == split]
         objects = sum(o["split"] == split for o in manifest["objects"])
         columns = []
-        for name in ATTRIBUTE_ORDER:
+        for name in ATTRIBUTES:
             values = np.array([s["attributes"][name] for s in chosen])
             text = (
                 f"{values.min():.3g} / {np.median(values):.3g} / {values.max():.3g}"

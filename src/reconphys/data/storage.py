@@ -8,7 +8,8 @@ Layout (docs/dataset.md has the full description)::
     DIR/samples/<id>/                  sample.json, frames.npz, trajectory.npz, view_<v>.mp4
 
 Every object and sample folder is assembled under a hidden staging name beside its target and
-renamed into place, so a folder either is complete or does not exist. The manifest is replaced
+renamed into place (:func:`reconphys.io.atomic_folder`), so a folder either is complete or does
+not exist. The manifest is replaced
 atomically and lists only complete samples. Files are byte-reproducible: .npz members carry a
 fixed timestamp and JSON is written with sorted keys.
 """
@@ -16,8 +17,6 @@ fixed timestamp and JSON is written with sorted keys.
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -29,6 +28,7 @@ import torch
 from .. import __version__
 from ..assets.ply import read_ply, write_ply
 from ..errors import InputError
+from ..io import atomic_file, atomic_folder, read_json, read_npz
 from .generate import GeneratedSample
 from .objects import CanonicalObject
 from .plan import PlannedSample
@@ -39,7 +39,6 @@ MANIFEST_FORMAT = "reconphys.dataset"
 OBJECT_FORMAT = "reconphys.object"
 SAMPLE_FORMAT = "reconphys.sample"
 VERSION = 1
-STAGING_PREFIX = ".staging-"
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
@@ -63,44 +62,10 @@ def write_npz(path: Path, arrays: dict[str, np.ndarray], compress: bool = False)
                 np.lib.format.write_array(f, np.asanyarray(array), allow_pickle=False)
 
 
-def read_npz(path: Path, names: tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
-    """Arrays of an .npz (only ``names`` when given); InputError naming the file otherwise."""
-    if not path.is_file():
-        raise InputError("file not found", source=str(path))
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            wanted = data.files if names is None else names
-            missing = [n for n in wanted if n not in data.files]
-            if missing:
-                raise InputError("missing", source=str(path), field=missing[0])
-            return {n: data[n] for n in wanted}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise InputError(f"not a readable .npz file ({e})", source=str(path)) from None
-
-
 def write_json(path: Path, data: dict) -> None:
     """JSON with sorted keys, replaced atomically."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_file(path) as tmp:
         tmp.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def read_json(path: Path, expected_format: str, version: int = VERSION) -> dict:
-    if not path.is_file():
-        raise InputError("file not found", source=str(path))
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise InputError(f"not valid JSON ({e})", source=str(path)) from None
-    if not isinstance(data, dict) or data.get("format") != expected_format:
-        raise InputError(f"expected format {expected_format!r}", source=str(path), field="format")
-    if data.get("version") != version:
-        raise InputError(f"version {data.get('version')!r} is not supported", str(path), "version")
-    return data
 
 
 @contextmanager
@@ -110,32 +75,14 @@ def staged_folder(target: Path) -> Iterator[Path]:
     On any error the staging folder is removed and ``target`` is left as it was. OSErrors
     (read-only or full disk) become InputError naming the target.
     """
-    staging = target.parent / f"{STAGING_PREFIX}{target.name}-{os.getpid()}"
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        if staging.exists():
-            shutil.rmtree(staging)
-        staging.mkdir()
-        yield staging
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(staging, target)
+        with atomic_folder(target, overwrite=True) as staging:
+            yield staging
     except OSError as e:
-        shutil.rmtree(staging, ignore_errors=True)
         reason = e.strerror or str(e)
         raise InputError(
             f"cannot write ({reason}); the dataset is unchanged", str(target)
         ) from None
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-
-
-def remove_stale_staging(parent: Path, name: str) -> None:
-    """Remove staging folders left for ``name`` by a killed run."""
-    if parent.is_dir():
-        for stale in parent.glob(f"{STAGING_PREFIX}{name}-*"):
-            shutil.rmtree(stale, ignore_errors=True)
 
 
 def _file_sizes(folder: Path) -> dict[str, int]:
@@ -146,7 +93,7 @@ def _is_complete(folder: Path, meta_name: str, fmt: str, fingerprint: str) -> bo
     """Complete = the metadata file parses, carries these settings, and lists every file with
     its size (the metadata is written last, the folder renamed into place after it)."""
     try:
-        meta = read_json(folder / meta_name, fmt)
+        meta = read_json(folder / meta_name, fmt, VERSION)
     except InputError:
         return False
     if meta.get("settings") != fingerprint:
@@ -207,7 +154,7 @@ def object_is_complete(root: Path, key: str, settings: DataSettings) -> bool:
 
 def read_object(folder: Path) -> CanonicalObject:
     """A canonical object folder, validated (shapes, dtypes, index ranges, finiteness)."""
-    meta = read_json(folder / "object.json", OBJECT_FORMAT)
+    meta = read_json(folder / "object.json", OBJECT_FORMAT, VERSION)
     gaussians = read_ply(folder / "gaussians.ply")
     anchors = read_npz(folder / "anchors.npz", ("x0", "springs", "rest_length"))
     binding = read_npz(folder / "binding.npz", ("index", "weight"))
@@ -278,7 +225,6 @@ def write_sample(
         )
         for v in range(len(sample.frames)):
             write_mp4(folder / video_name(v), sample.frames[v], fps=1.0 / settings.frame_dt)
-            (folder / video_name(v)).chmod(0o644)  # written via mkstemp, which makes it 0600
         spec, placement, cameras = sample.spec, sample.placement, sample.cameras
         meta = {
             "format": SAMPLE_FORMAT,
@@ -322,7 +268,7 @@ def sample_is_complete(root: Path, sample_id: str, settings: DataSettings) -> bo
 
 
 def read_sample_meta(root: Path, sample_id: str) -> dict:
-    return read_json(root / "samples" / sample_id / "sample.json", SAMPLE_FORMAT)
+    return read_json(root / "samples" / sample_id / "sample.json", SAMPLE_FORMAT, VERSION)
 
 
 def manifest_entry(meta: dict) -> dict:
@@ -390,7 +336,7 @@ def read_manifest(root: Path, name: str = MANIFEST) -> dict:
     if not path.is_file():
         hint = " (an unfinished or sharded run: rerun make-data, or run data merge)"
         raise InputError("file not found" + hint, source=str(path))
-    manifest = read_json(path, MANIFEST_FORMAT)
+    manifest = read_json(path, MANIFEST_FORMAT, VERSION)
     for key in ("settings", "samples", "objects", "complete"):
         if key not in manifest:
             raise InputError("missing", source=str(path), field=key)

@@ -25,6 +25,8 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 from torch import Tensor
 
+from ..physics import ATTRIBUTES
+
 FOREGROUND_THRESHOLD = 10.0 / 255.0  # 0.0392: darker ground-truth pixels are background
 CHAMFER_POINTS = 8192
 EMD_POINTS = 2048
@@ -174,7 +176,7 @@ def attribute_errors(
     true: dict[str, Tensor],  # name → [S]
 ) -> dict[str, float]:
     """Mean absolute error of mass, stiffness, damping, friction and of the observables."""
-    names = ("mass", "stiffness", "damping", "friction")
+    names = ATTRIBUTES
     errors = {n: float((predicted[n] - true[n]).abs().mean()) for n in names}
     p_obs, t_obs = observable_attributes(predicted), observable_attributes(true)
     errors.update({n: float((p_obs[n] - t_obs[n]).abs().mean()) for n in OBSERVABLES})

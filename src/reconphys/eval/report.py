@@ -11,13 +11,14 @@ import json
 import math
 import os
 import platform
-import shutil
 from pathlib import Path
 
 import torch
 
 from .. import __version__
 from ..errors import InputError
+from ..io import atomic_folder
+from ..physics import ATTRIBUTES
 from .evaluate import INITIAL_SUFFIX, Results
 from .lpips import MIN_SIDE
 from .metrics import FOREGROUND_THRESHOLD, SSIM_SIGMA, SSIM_WINDOW
@@ -130,7 +131,7 @@ def write_csvs(results: Results, document: dict, folder: Path) -> None:
                     entry["samples_scored"],
                 ]
             )
-    names = ("mass", "stiffness", "damping", "friction")
+    names = ATTRIBUTES
     with open(folder / "per_sample.csv", "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(
@@ -348,26 +349,16 @@ def write_report(
     if command:
         settings["command"] = command
     document = metrics_document(results, settings)
-    staging = out.parent / f".{out.name}.staging-{os.getpid()}"
     try:
-        if staging.exists():
-            shutil.rmtree(staging)
-        staging.mkdir(parents=True)
-        with open(staging / "metrics.json", "w") as f:
-            json.dump(document, f, indent=1, allow_nan=False)
-            f.write("\n")
-        write_csvs(results, document, staging)
-        (staging / "report.md").write_text(report_markdown(results, document, command))
-        psnr_curves(results, staging / "psnr_per_frame.png")
-        attribute_scatter(results, staging / "attributes_scatter.png")
-        contact_sheet(results, staging / "contact_sheet.png")
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(staging, out)
+        with atomic_folder(out, overwrite=True) as staging:  # check_output refused a used one
+            with open(staging / "metrics.json", "w") as f:
+                json.dump(document, f, indent=1, allow_nan=False)
+                f.write("\n")
+            write_csvs(results, document, staging)
+            (staging / "report.md").write_text(report_markdown(results, document, command))
+            psnr_curves(results, staging / "psnr_per_frame.png")
+            attribute_scatter(results, staging / "attributes_scatter.png")
+            contact_sheet(results, staging / "contact_sheet.png")
     except OSError as e:
-        shutil.rmtree(staging, ignore_errors=True)
         raise InputError(f"cannot write ({e.strerror or e})", source=str(out)) from None
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return document

@@ -17,10 +17,10 @@ import torch
 from torch import Tensor
 
 from ..assets.asset import Asset
-from ..data.dataset import ATTRIBUTE_ORDER, DropDataset
+from ..data.dataset import DropDataset
 from ..data.settings import DataSettings
 from ..errors import InputError
-from ..physics import ATTRIBUTE_RANGES
+from ..physics import ATTRIBUTE_RANGES, ATTRIBUTES
 from ..render import Cameras
 from ..simulate import gaussian_centres
 
@@ -109,9 +109,7 @@ class EvalSet:
                 "no training split: midpoints of the DESIGN §5 ranges (medians of the paper's "
                 "uniform training distribution)",
             )
-        values = {
-            name: float(statistics.median(a[name] for a in train)) for name in ATTRIBUTE_ORDER
-        }
+        values = {name: float(statistics.median(a[name] for a in train)) for name in ATTRIBUTES}
         return TrivialAttributes(values, f"median of the {len(train)} training samples")
 
     def load(self, position: int) -> EvalSample:

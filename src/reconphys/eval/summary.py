@@ -17,11 +17,12 @@ import math
 import numpy as np
 import torch
 
+from ..physics import ATTRIBUTES
 from .evaluate import INITIAL_SUFFIX, INPUT_FRAMES, Results, Row, SampleResult
 from .metrics import attribute_errors
 
 IMAGE_AND_POINT_METRICS = ("psnr", "ssim", "lpips", "cd", "emd")
-ATTRIBUTE_KEYS = ("mass", "stiffness", "damping", "friction", "log_k_over_m", "log_d_over_m")
+ATTRIBUTE_KEYS = (*ATTRIBUTES, "log_k_over_m", "log_d_over_m")
 
 
 def windows(num_frames: int) -> dict[str, tuple[int, int]]:
@@ -56,7 +57,7 @@ def attribute_mae(results: list[SampleResult]) -> dict[str, float | None]:
     have = [r for r in results if r.predicted_attributes is not None and r.failure is None]
     if not have:
         return dict.fromkeys(ATTRIBUTE_KEYS)
-    names = ("mass", "stiffness", "damping", "friction")
+    names = ATTRIBUTES
 
     def column(source: str, name: str) -> torch.Tensor:
         return torch.tensor([getattr(r, source)[name] for r in have], dtype=torch.float64)

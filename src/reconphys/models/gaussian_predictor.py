@@ -24,6 +24,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from ..assets.gaussians import SH_C0, Gaussians
+from ..geometry import matrix_to_quaternion, quaternion_multiply
 
 OUTPUT_CHANNELS = 1 + 3 + 3 + 4 + 1 + 3  # depth, offset, log-scale, quaternion, opacity, colour
 
@@ -148,9 +149,7 @@ class GaussianPredictor(nn.Module):
 
 def _rotate_quaternions(quats: Tensor, world_to_cam_rotation: Tensor) -> Tensor:
     """Camera-frame rotations [B, N, 4] (wxyz) → world frame, given R = world_to_cam [B, 3, 3]."""
-    from ..assets.normalize import quaternion_multiply, rotation_to_quaternion
-
-    cam_to_world = rotation_to_quaternion(world_to_cam_rotation.transpose(-1, -2))  # [B, 4]
+    cam_to_world = matrix_to_quaternion(world_to_cam_rotation.transpose(-1, -2))  # [B, 4]
     return quaternion_multiply(cam_to_world[:, None].expand_as(quats), quats)
 
 

@@ -11,10 +11,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..data.storage import read_json
 from ..errors import InputError
+from ..io import atomic_file, read_json
 from .gaussian_predictor import GaussianPredictor, GaussianPredictorConfig
-from .shipped import TRAINED_NAME, _replace_atomically, config_path
+from .shipped import TRAINED_NAME, config_path
 
 FORMAT = "reconphys.gaussian_predictor"
 VERSION = 1
@@ -39,15 +39,16 @@ def save_gaussian_predictor(model: GaussianPredictor, path: str | os.PathLike, t
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().float().cpu().contiguous() for k, v in model.state_dict().items()}
-    _replace_atomically(path, lambda tmp: save_file(tensors, str(tmp), {"format": FORMAT}))
+    with atomic_file(path) as tmp:
+        save_file(tensors, str(tmp), {"format": FORMAT})
     metadata = {
         "format": FORMAT,
         "version": VERSION,
         "predictor": model.config.to_dict(),
         "training": training,
     }
-    text = json.dumps(metadata, indent=1) + "\n"
-    _replace_atomically(config_path(path), lambda tmp: tmp.write_text(text))
+    with atomic_file(config_path(path)) as tmp:
+        tmp.write_text(json.dumps(metadata, indent=1) + "\n")
     return path
 
 

@@ -24,9 +24,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from ..physics.model import ATTRIBUTE_RANGES
+from ..physics.model import ATTRIBUTE_RANGES, ATTRIBUTES
 
-ATTRIBUTE_ORDER = ("mass", "stiffness", "damping", "friction")
 LOG_SCALED = ("mass", "stiffness", "damping")
 
 
@@ -285,7 +284,7 @@ def _bounds(name: str) -> tuple[float, float]:
 def attributes_from_unit(unit: Tensor) -> dict[str, Tensor]:
     """[..., 4] in [0, 1] → {mass, stiffness, damping, friction} in the DESIGN §5 ranges."""
     out = {}
-    for index, name in enumerate(ATTRIBUTE_ORDER):
+    for index, name in enumerate(ATTRIBUTES):
         low, high = _bounds(name)
         value = low + unit[..., index] * (high - low)
         out[name] = torch.exp(value) if name in LOG_SCALED else value
@@ -294,11 +293,11 @@ def attributes_from_unit(unit: Tensor) -> dict[str, Tensor]:
 
 def normalize_attributes(attributes: dict[str, Tensor] | Tensor) -> Tensor:
     """Inverse of :func:`attributes_from_unit`: attributes (dict, or [..., 4] in
-    ATTRIBUTE_ORDER) → [..., 4] in [0, 1] (clamped)."""
+    ATTRIBUTES) → [..., 4] in [0, 1] (clamped)."""
     if isinstance(attributes, Tensor):
-        attributes = {n: attributes[..., i] for i, n in enumerate(ATTRIBUTE_ORDER)}
+        attributes = {n: attributes[..., i] for i, n in enumerate(ATTRIBUTES)}
     columns = []
-    for name in ATTRIBUTE_ORDER:
+    for name in ATTRIBUTES:
         low, high = _bounds(name)
         value = attributes[name]
         value = torch.log(value) if name in LOG_SCALED else value
@@ -343,7 +342,7 @@ class PhysicsPredictor(nn.Module):
         for width in config.mlp_hidden:
             layers += [nn.Linear(previous, width), nn.GELU()]
             previous = width
-        layers.append(nn.Linear(previous, len(ATTRIBUTE_ORDER)))
+        layers.append(nn.Linear(previous, len(ATTRIBUTES)))
         self.head = nn.Sequential(*layers)
 
     def forward(self, frames: Tensor) -> dict[str, Tensor]:

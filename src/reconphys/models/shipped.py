@@ -20,11 +20,10 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from ..data.storage import read_json
 from ..errors import InputError
-from ..physics.model import ATTRIBUTE_RANGES
+from ..io import atomic_file, read_json
+from ..physics.model import ATTRIBUTE_RANGES, ATTRIBUTES
 from .physics_predictor import (
-    ATTRIBUTE_ORDER,
     LOG_SCALED,
     PhysicsPredictor,
     PredictorConfig,
@@ -77,21 +76,11 @@ def model_metadata(
             "resolution": config.resolution,  # square, pixels
             "frame_dt": frame_dt,  # seconds between frames
         },
-        "attribute_order": list(ATTRIBUTE_ORDER),
-        "attribute_ranges": {n: list(ATTRIBUTE_RANGES[n]) for n in ATTRIBUTE_ORDER},
-        "attribute_scaling": {n: "log" if n in LOG_SCALED else "linear" for n in ATTRIBUTE_ORDER},
+        "attribute_order": list(ATTRIBUTES),
+        "attribute_ranges": {n: list(ATTRIBUTE_RANGES[n]) for n in ATTRIBUTES},
+        "attribute_scaling": {n: "log" if n in LOG_SCALED else "linear" for n in ATTRIBUTES},
         "training": training or {},
     }
-
-
-def _replace_atomically(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def save_predictor(model: PhysicsPredictor, path: str | os.PathLike, metadata: dict) -> Path:
@@ -104,9 +93,10 @@ def save_predictor(model: PhysicsPredictor, path: str | os.PathLike, metadata: d
     path.parent.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().float().cpu().contiguous() for k, v in model.state_dict().items()}
     header = {"format": FORMAT, "version": str(VERSION)}
-    _replace_atomically(path, lambda tmp: save_file(tensors, str(tmp), metadata=header))
-    text = json.dumps(metadata, indent=1) + "\n"
-    _replace_atomically(config_path(path), lambda tmp: tmp.write_text(text))
+    with atomic_file(path) as tmp:
+        save_file(tensors, str(tmp), metadata=header)
+    with atomic_file(config_path(path)) as tmp:
+        tmp.write_text(json.dumps(metadata, indent=1) + "\n")
     return path
 
 
@@ -153,7 +143,7 @@ def _read_metadata(path: Path) -> dict:
         if not isinstance(metadata.get(key), dict):
             raise InputError("missing", source=str(json_path), field=key)
     ranges = metadata.get("attribute_ranges", {})
-    for name in ATTRIBUTE_ORDER:
+    for name in ATTRIBUTES:
         if list(ranges.get(name, [])) != list(ATTRIBUTE_RANGES[name]):
             raise InputError(
                 f"trained for the range {ranges.get(name)}, this version uses "

@@ -14,10 +14,11 @@ from .integrator import (
     stable_substeps,
     step,
 )
-from .model import ATTRIBUTE_RANGES, GRAVITY, SpringMassModel, knn_springs
+from .model import ATTRIBUTE_RANGES, ATTRIBUTES, GRAVITY, SpringMassModel, knn_springs
 from .state import Control, State
 
 __all__ = [
+    "ATTRIBUTES",
     "ATTRIBUTE_RANGES",
     "GRAVITY",
     "Control",

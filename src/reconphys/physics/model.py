@@ -24,7 +24,8 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
-GRAVITY = (0.0, 0.0, -9.8)
+GRAVITY = (0.0, 0.0, -9.8)  # m/s², world z up
+ATTRIBUTES = ("mass", "stiffness", "damping", "friction")  # the four the network predicts
 
 # Attribute ranges of the synthetic data (DESIGN §5); the stability bound covers all of them.
 ATTRIBUTE_RANGES = {
@@ -73,7 +74,7 @@ class SpringMassModel:
         device = self.springs.device
         self.springs = self.springs.to(device=device, dtype=torch.int64)
         self.rest_length = self.rest_length.to(device=device, dtype=self.dtype)
-        for name in ("mass", "stiffness", "damping", "friction"):
+        for name in ATTRIBUTES:
             setattr(self, name, _batched(getattr(self, name), self.dtype, device))
         self.gravity = tuple(float(g) for g in self.gravity)
         # Kept on the device so that a substep does no host-to-device copy.

@@ -33,7 +33,7 @@ from ..capture.placement import (
     silhouette_iou,
 )
 from ..errors import InputError
-from ..models.physics_predictor import ATTRIBUTE_ORDER
+from ..physics import ATTRIBUTES as ATTRIBUTE_ORDER
 from .model_input import predictor_frames
 from .settings import DEFAULT_NUM_ANCHORS
 

@@ -30,9 +30,10 @@ import math
 from dataclasses import dataclass
 
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 from torch.utils.checkpoint import checkpoint
+
+from ..geometry import quaternion_to_matrix
 
 ALPHA_THRESHOLD = 1.0 / 255.0  # a Gaussian whose alpha at a pixel is below this is skipped there
 MAX_ALPHA = 0.999  # gsplat 1.5.3 clamps the per-Gaussian alpha to this
@@ -45,21 +46,6 @@ LOG_ALPHA_FLOOR = math.log(ALPHA_THRESHOLD) - 1.0
 LOG_TRANSMITTANCE_FLOOR = math.log(MIN_TRANSMITTANCE) - 1.0
 DEFAULT_CHUNK_PIXELS_CPU = 256  # pixels per tile: small tiles cull more Gaussians per tile
 DEFAULT_CHUNK_PIXELS_GPU = 4096  # large tiles launch fewer kernels
-
-
-def quaternions_to_rotations(
-    quats: Tensor,  # [..., 4] (w, x, y, z), any non-zero norm
-) -> Tensor:  # [..., 3, 3]
-    """Rotation matrices of (normalised) wxyz quaternions."""
-    w, x, y, z = F.normalize(quats, dim=-1).unbind(-1)
-    # fmt: off
-    rows = [
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ]
-    # fmt: on
-    return torch.stack(rows, dim=-1).reshape(*quats.shape[:-1], 3, 3)
 
 
 @dataclass
@@ -111,7 +97,7 @@ def project_gaussians(
     ).reshape(*z.shape, 2, 3)  # [..., C, N, 2, 3]
 
     # Σ₂ = (J R_cam) (R_q S)(R_q S)ᵀ (J R_cam)ᵀ
-    local_to_world = quaternions_to_rotations(quats) * scales.unsqueeze(-2)  # [..., N, 3, 3]
+    local_to_world = quaternion_to_matrix(quats) * scales.unsqueeze(-2)  # [..., N, 3, 3]
     factor = jacobian @ rotation @ local_to_world.unsqueeze(-4)  # [..., C, N, 2, 3]
     cov2d = factor @ factor.transpose(-1, -2)  # [..., C, N, 2, 2]
     c00 = cov2d[..., 0, 0] + eps2d

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import imageio.v2 as imageio
@@ -11,22 +10,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from ..io import atomic_file
+
 
 def to_uint8(
     images: Tensor,  # [..., H, W, 3] floats in [0, 1]
 ) -> np.ndarray:  # [..., H, W, 3] uint8
     return (images.detach().clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
-
-
-def _atomic_target(path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    # mkstemp creates 0600; give the final file the usual permissions (0666 minus the umask).
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    return Path(tmp)
 
 
 def write_mp4(
@@ -40,8 +30,7 @@ def write_mp4(
     pad_h, pad_w = frames.shape[1] % 2, frames.shape[2] % 2
     if pad_h or pad_w:
         frames = np.pad(frames, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)))
-    tmp = _atomic_target(path)
-    try:
+    with atomic_file(path) as tmp:
         writer = imageio.get_writer(
             tmp,
             format="FFMPEG",
@@ -54,23 +43,14 @@ def write_mp4(
         with writer:
             for frame in frames:
                 writer.append_data(frame)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path
 
 
 def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     """Write one [H, W, 3] uint8 image as PNG, atomically."""
     path = Path(path)
-    tmp = _atomic_target(path)
-    try:
+    with atomic_file(path) as tmp:
         imageio.imwrite(tmp, image, format="PNG")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path
 
 

@@ -9,7 +9,6 @@ with ``torch.load(weights_only=True)``.
 
 from __future__ import annotations
 
-import os
 import random
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import numpy as np
 import torch
 
 from ..errors import InputError
+from ..io import atomic_file
 
 CHECKPOINT = "checkpoint.pt"
 FORMAT = "reconphys.train_checkpoint"
@@ -61,16 +61,11 @@ def set_rng_state(state: dict) -> None:
 
 def save_checkpoint(path: Path, payload: dict) -> None:
     """``torch.save`` to a temporary file beside ``path``, then rename it into place."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        torch.save({"format": FORMAT, "version": VERSION, **payload}, tmp)
-        os.replace(tmp, path)
+        with atomic_file(path) as tmp:
+            torch.save({"format": FORMAT, "version": VERSION, **payload}, tmp)
     except OSError as e:
-        tmp.unlink(missing_ok=True)
         raise InputError(f"cannot write ({e.strerror or e})", source=str(path)) from None
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def load_checkpoint(path: Path) -> dict:

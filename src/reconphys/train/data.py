@@ -26,12 +26,13 @@ from torch import Tensor
 from torch.utils.data import Dataset, Sampler
 
 from ..assets.asset import Asset
-from ..data.dataset import ATTRIBUTE_ORDER, DropDataset, GeneratedDropDataset
+from ..data.dataset import DropDataset, GeneratedDropDataset
 from ..data.objects import place, sample_asset
 from ..data.sampling import draw_sample
 from ..data.settings import DataSettings, make_settings
 from ..data.storage import read_manifest
 from ..errors import InputError
+from ..physics import ATTRIBUTES as ATTRIBUTE_ORDER
 from .config import GENERATE, DataConfig
 
 GEOMETRY = "ground truth (the dataset's canonical Gaussians, anchors and springs)"

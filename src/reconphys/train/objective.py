@@ -21,8 +21,8 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from ..assets.asset import Asset
-from ..models.physics_predictor import ATTRIBUTE_ORDER, normalize_attributes
-from ..physics import SpringMassModel, State, deform_means, rollout, stable_substeps
+from ..models.physics_predictor import normalize_attributes
+from ..physics import ATTRIBUTES, SpringMassModel, State, deform_means, rollout, stable_substeps
 from ..physics.model import ATTRIBUTE_RANGES
 from ..render import Cameras, render
 from .config import SUPERVISED_TARGETS
@@ -126,7 +126,7 @@ def _log_ratio_bounds(numerator: str) -> tuple[float, float]:
 
 
 def normalize_observables(attributes: Tensor) -> Tensor:
-    """[..., 4] attributes (ATTRIBUTE_ORDER) → [..., 4] (log m, log k/m, log d/m, f), each scaled
+    """[..., 4] attributes (ATTRIBUTES) → [..., 4] (log m, log k/m, log d/m, f), each scaled
     to [0, 1] over its range: the quantities a video determines (DESIGN §4), and the mass."""
     mass, stiffness, damping, friction = attributes.unbind(-1)
     columns = [normalize_attributes(attributes)[..., 0]]
@@ -139,7 +139,7 @@ def normalize_observables(attributes: Tensor) -> Tensor:
 
 def supervised_loss(
     attributes: dict[str, Tensor],  # predicted, name → [B]
-    true: Tensor,  # [B, 4] true attributes in ATTRIBUTE_ORDER
+    true: Tensor,  # [B, 4] true attributes in ATTRIBUTES
     target: str = "attributes",
 ) -> Tensor:
     """Mean L1 between predicted and true values, normalised to [0, 1] ranges.
@@ -148,7 +148,7 @@ def supervised_loss(
     ``target="observables"``: log m, log k/m, log d/m and f (:func:`normalize_observables`): the
     unobservable absolute scale no longer leaks into the stiffness and damping errors.
     """
-    predicted = torch.stack([attributes[n] for n in ATTRIBUTE_ORDER], -1)
+    predicted = torch.stack([attributes[n] for n in ATTRIBUTES], -1)
     if target == "attributes":
         return (normalize_attributes(predicted) - normalize_attributes(true)).abs().mean()
     if target == "observables":

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import random
 import shutil
 import time
@@ -41,7 +40,8 @@ from torch.utils.data import DataLoader
 
 from .. import __version__
 from ..errors import InputError
-from ..models.physics_predictor import ATTRIBUTE_ORDER, PhysicsPredictor, resize_frames
+from ..io import atomic_file
+from ..models.physics_predictor import PhysicsPredictor, resize_frames
 from ..models.shipped import (
     TRAINED_NAME,
     LoadedPredictor,
@@ -49,6 +49,7 @@ from ..models.shipped import (
     model_metadata,
     save_predictor,
 )
+from ..physics import ATTRIBUTES
 from ..render import Cameras
 from ..threads import set_cpu_threads
 from . import distributed
@@ -106,7 +107,7 @@ def compute_losses(
     with torch.autocast(device.type, dtype=autocast_dtype or torch.float32,
                         enabled=autocast_dtype is not None):  # fmt: skip
         out = model(inputs)
-    attributes = {name: out[name].float() for name in ATTRIBUTE_ORDER}  # simulate in float32
+    attributes = {name: out[name].float() for name in ATTRIBUTES}  # simulate in float32
     kind = config.objective.kind
     terms: dict[str, Tensor] = {}
     if kind in ("self_supervised", "mixed"):
@@ -488,9 +489,8 @@ def _truncate_log(path: Path, step: int) -> None:
                 kept.append(line)
         except (json.JSONDecodeError, KeyError, TypeError):
             continue  # a line cut short by the kill
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text("".join(line + "\n" for line in kept))
-    os.replace(tmp, path)
+    with atomic_file(path) as tmp:
+        tmp.write_text("".join(line + "\n" for line in kept))
 
 
 def train(

@@ -26,8 +26,8 @@ import torch
 
 from ..assets.gaussians import Gaussians
 from ..errors import InputError
+from ..geometry import quaternion_to_matrix as quaternions_to_rotations
 from ..render import Cameras, intrinsics_from_fov
-from ..render.torch_backend import quaternions_to_rotations
 from .session import ViewerSession
 
 GRIP_SLOTS = ("grip 1", "grip 2")

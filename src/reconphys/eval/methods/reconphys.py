@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from ...models.physics_predictor import ATTRIBUTE_ORDER
 from ...models.shipped import load_predictor
+from ...physics import ATTRIBUTES
 from ..samples import EvalSample
 from .base import GROUND_TRUTH_GEOMETRY, Method, MethodOptions, Prediction
 
@@ -37,7 +37,7 @@ class ReconPhysMethod(Method):
         view = self.predictor.view
         frames = sample.frames[view : view + 1, : self.predictor.num_frames]  # [1, T, H, W, 3]
         out = self.predictor.predict(frames)
-        values = {name: float(out[name][0]) for name in ATTRIBUTE_ORDER}
+        values = {name: float(out[name][0]) for name in ATTRIBUTES}
         truth = sample.true_asset
         asset = replace(truth, physics=replace(truth.physics, **values))
         return Prediction(asset=asset)

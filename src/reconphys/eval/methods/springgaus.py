@@ -34,6 +34,7 @@ from torch import Tensor
 from ...assets.asset import Asset, PhysicsSettings
 from ...assets.build import build_asset
 from ...assets.gaussians import Gaussians
+from ...geometry import axis_angle_to_matrix, rigid_velocity
 from ...physics import ATTRIBUTE_RANGES, State, deform_means, rollout
 from ...render import Cameras, render
 from ..samples import EvalSample
@@ -68,22 +69,6 @@ class SpringGausSettings:
     lr_velocity: float = 0.1  # m/s and rad/s per step
     dynamic_epochs: int = 20
     lr_attributes: float = 0.05  # per step, in log(k/m), log(d/m) and friction logit
-
-
-def _rigid_velocity(anchors: Tensor, linear: Tensor, angular: Tensor) -> Tensor:
-    """[N_A, 3] velocities of the rigid motion (linear, angular about the centroid)."""
-    return linear + torch.linalg.cross(angular.expand_as(anchors), anchors - anchors.mean(0))
-
-
-def _rotations(rotation_vectors: Tensor) -> Tensor:  # [F, 3] axis × angle → [F, 3, 3]
-    """Rodrigues' formula, differentiable at zero (the angle gets a tiny floor)."""
-    angle = torch.sqrt((rotation_vectors**2).sum(-1, keepdim=True) + 1e-12)  # [F, 1]
-    x, y, z = (rotation_vectors / angle).unbind(-1)
-    zero = torch.zeros_like(x)
-    cross = torch.stack([zero, -z, y, z, zero, -x, -y, x, zero], -1).reshape(-1, 3, 3)
-    s, c = torch.sin(angle)[..., None], torch.cos(angle)[..., None]
-    eye = torch.eye(3, dtype=rotation_vectors.dtype, device=rotation_vectors.device)
-    return eye + s * cross + (1 - c) * (cross @ cross)
 
 
 def _free_fall_velocity(
@@ -218,7 +203,7 @@ class SpringGausMethod(Method):
             iteration == 0 or time.perf_counter() < deadline
         ):
             optimizer.zero_grad(set_to_none=True)
-            rotations = _rotations(times[:, None] * angular)  # [F, 3, 3]
+            rotations = axis_angle_to_matrix(times[:, None] * angular)  # [F, 3, 3]
             means = (
                 centroid
                 + offsets @ rotations.transpose(-1, -2)
@@ -232,7 +217,7 @@ class SpringGausMethod(Method):
             losses.append(loss.item())
             iteration += 1
         with torch.no_grad():
-            v0 = _rigid_velocity(x0, linear, angular).cpu()
+            v0 = rigid_velocity(x0, linear, angular).cpu()
         info = {
             "velocity_iterations": iteration,
             "velocity_loss_first": losses[0],
