@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
+from reconphys.models.encoders import ENCODERS, SmallCNN
 from reconphys.models.physics_predictor import (
-    ENCODERS,
     PhysicsPredictor,
     PredictorConfig,
     attributes_from_unit,
@@ -86,7 +86,6 @@ def test_config_round_trip():
 def test_coordinate_channels_make_pooled_features_see_position():
     """Without coords the stride-4 CNN is translation-equivariant (a blob moved by 4 px away from
     the borders gives the same spatially averaged features); with coords the average moves."""
-    from reconphys.models.physics_predictor import SmallCNN
 
     image = torch.zeros(2, 3, 64, 64)  # receptive field ±9 px: the blobs never see a border
     image[0, :, 28:34, 24:30] = 1.0

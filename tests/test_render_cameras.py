@@ -116,3 +116,15 @@ def test_cameras_to_expand_and_validation():
         Cameras(K=cams.K[:2], world_to_cam=cams.world_to_cam, width=32, height=16)
     with pytest.raises(ValueError, match="positive"):
         Cameras(K=cams.K, world_to_cam=cams.world_to_cam, width=0, height=16)
+
+
+def test_select_picks_cameras_by_index_or_slice():
+    cameras = dataset_views(32, 24)
+    picked = cameras.select([2, 0])
+    assert torch.equal(picked.K, cameras.K[[2, 0]]) and (picked.width, picked.height) == (32, 24)
+    assert torch.equal(picked.world_to_cam, cameras.world_to_cam[[2, 0]])
+    assert torch.equal(cameras.select(slice(1, 2)).K, cameras.K[1:2])
+    batched = Cameras(
+        cameras.K.expand(5, -1, -1, -1), cameras.world_to_cam.expand(5, -1, -1, -1), 32, 24
+    )
+    assert batched.select(torch.tensor([3])).K.shape == (5, 1, 3, 3)

@@ -138,7 +138,7 @@ def test_padded_springs_change_nothing(tiny_batch):
 
     def loss_of(assets, index):
         picked = {n: v[index] for n, v in attributes.items()}
-        cams = Cameras(cameras.K[index], cameras.world_to_cam[index], 16, 16)
+        cams = cameras.select(index)
         return photometric_loss(
             picked, SceneBatch.from_assets(assets), frames[index], cams, min_substeps=200
         )  # 200 substeps: more than either scene's bound, so both runs use the same

@@ -9,15 +9,14 @@ friction is ``σ(z)`` in [0, 1]. :func:`normalize_attributes` is the inverse map
 space of the supervised loss. (The reference code maps linearly and lets friction reach 2.4; we
 keep the data's ranges so that every prediction is a valid, stable simulator input.)
 
-Encoders are looked up by name in :data:`ENCODERS`; the default ``small_cnn`` is trained from
-scratch. Pretrained encoders (``timm`` by name, ``transformers`` from a local folder such as
-InternViT) are in :mod:`reconphys.models.pretrained` and load from local files only.
+Encoders are looked up by name in :mod:`reconphys.models.encoders`; the default ``small_cnn`` is
+trained from scratch. Pretrained encoders (``timm`` by name, ``transformers`` from a local folder
+such as InternViT) are in :mod:`reconphys.models.pretrained` and load from local files only.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import torch
@@ -25,6 +24,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from ..physics.model import ATTRIBUTE_RANGES, ATTRIBUTES
+from .encoders import build_encoder, encoder_names, group_norm
 
 LOG_SCALED = ("mass", "stiffness", "damping")
 
@@ -55,76 +55,8 @@ class PredictorConfig:
         return cls(**data)
 
 
-# --- encoders -------------------------------------------------------------------------------
-
-ENCODERS: dict[str, Callable[[PredictorConfig], nn.Module]] = {}
-
-
-def register_encoder(name: str):
-    """Decorator: ``ENCODERS[name] = factory(config) -> module``; the module maps images
-    [N, 3, H, W] to feature maps [N, C, h, w] and has an ``out_channels`` attribute."""
-
-    def wrap(factory):
-        ENCODERS[name] = factory
-        return factory
-
-    return wrap
-
-
-def _group_norm(channels: int) -> nn.GroupNorm:
-    return nn.GroupNorm(min(8, channels), channels)
-
-
-class SmallCNN(nn.Module):
-    """Stride-2 conv stages with GroupNorm and SiLU: [N, 3, H, W] → [N, C, H/2^S, W/2^S].
-
-    ``coords=True`` appends two channels holding the pixel's x and y in [−1, 1] to the input
-    (CoordConv): the trunk averages its maps over space, and without them the features say
-    little about *where* the object is — e.g. how far it slides (friction).
-    """
-
-    def __init__(self, channels: tuple[int, ...], coords: bool = False, in_channels: int = 3):
-        super().__init__()
-        self.coords = coords
-        layers, previous = [], in_channels + (2 if coords else 0)
-        for c in channels:
-            layers += [
-                nn.Conv2d(previous, c, 3, stride=2, padding=1),
-                _group_norm(c),
-                nn.SiLU(),
-                nn.Conv2d(c, c, 3, padding=1),
-                _group_norm(c),
-                nn.SiLU(),
-            ]
-            previous = c
-        self.layers = nn.Sequential(*layers)
-        self.out_channels = previous
-
-    def forward(self, images: Tensor) -> Tensor:
-        if self.coords:
-            n, _, h, w = images.shape
-            y = torch.linspace(-1, 1, h, device=images.device, dtype=images.dtype)
-            x = torch.linspace(-1, 1, w, device=images.device, dtype=images.dtype)
-            grid = torch.stack(torch.meshgrid(x, y, indexing="xy"))  # [2, H, W]: x, y
-            images = torch.cat([images, grid.expand(n, 2, h, w)], 1)
-        return self.layers(images)
-
-
-@register_encoder("small_cnn")
-def _small_cnn(config: PredictorConfig) -> nn.Module:
-    unknown = set(config.extra) - {"coords"}
-    if unknown:
-        raise ValueError(f"extra: small_cnn takes only 'coords', got {sorted(unknown)}")
-    return SmallCNN(
-        config.encoder_channels,
-        coords=bool(config.extra.get("coords", False)),
-        in_channels=3 * MOTION_CHANNEL_GROUPS if config.motion else 3,
-    )
-
-
 # --- motion channels ------------------------------------------------------------------------
 
-MOTION_CHANNEL_GROUPS = 3  # the frame, its change from the previous frame, its change from frame 0
 MOTION_GAIN = 4.0  # sub-pixel motion changes pixels by a few percent: bring it to the frame's scale
 
 
@@ -154,13 +86,13 @@ class Residual3d(nn.Module):
         inner = max(channels // 2, 8)
         self.body = nn.Sequential(
             nn.Conv3d(channels, inner, 1),
-            _group_norm(inner),
+            group_norm(inner),
             nn.SiLU(),
             nn.Conv3d(inner, inner, 3, padding=1),
-            _group_norm(inner),
+            group_norm(inner),
             nn.SiLU(),
             nn.Conv3d(inner, channels, 1),
-            _group_norm(channels),
+            group_norm(channels),
         )
         self.act = nn.SiLU()
 
@@ -326,13 +258,13 @@ class PhysicsPredictor(nn.Module):
     def __init__(self, config: PredictorConfig | None = None):
         super().__init__()
         self.config = config = config or PredictorConfig()
-        if config.encoder not in ENCODERS:
-            raise ValueError(f"encoder: unknown {config.encoder!r}; known: {sorted(ENCODERS)}")
+        if config.encoder not in encoder_names():
+            raise ValueError(f"encoder: unknown {config.encoder!r}; known: {encoder_names()}")
         if config.motion and config.encoder != "small_cnn":
             raise ValueError(
                 f"motion: only the small_cnn encoder reads motion channels, got {config.encoder!r}"
             )
-        self.encoder = ENCODERS[config.encoder](config)
+        self.encoder = build_encoder(config)
         c = config.token_channels
         self.project = nn.Conv3d(self.encoder.out_channels, c, 1)
         self.trunk = nn.Sequential(*[Residual3d(c) for _ in range(config.trunk_blocks)])
@@ -363,8 +295,3 @@ class PhysicsPredictor(nn.Module):
             pooled = pooled + self.silhouette(frames)
         unit = torch.sigmoid(self.head(pooled))
         return {"unit": unit, **attributes_from_unit(unit)}
-
-
-# Pretrained encoders (timm, transformers) register themselves on import; they need optional
-# packages only when used.
-from . import pretrained  # noqa: E402, F401

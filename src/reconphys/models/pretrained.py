@@ -30,7 +30,8 @@ import torch
 from torch import Tensor, nn
 
 from ..errors import InputError
-from .physics_predictor import PredictorConfig, register_encoder
+from .encoders import register_encoder
+from .physics_predictor import PredictorConfig
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)

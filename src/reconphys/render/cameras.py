@@ -41,6 +41,14 @@ class Cameras:
                 f"Cameras: image size must be positive, got {self.width}×{self.height}"
             )
 
+    def select(self, index: Tensor | Sequence[int] | slice) -> Cameras:
+        """The cameras ``index`` (indices or a slice along C): ``[..., C', ·, ·]``."""
+        if not isinstance(index, slice):
+            index = torch.as_tensor(index, dtype=torch.int64, device=self.K.device)
+        return Cameras(
+            self.K[..., index, :, :], self.world_to_cam[..., index, :, :], self.width, self.height
+        )
+
     @property
     def num_cameras(self) -> int:
         return self.K.shape[-3]

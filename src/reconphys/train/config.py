@@ -27,7 +27,8 @@ from pathlib import Path
 
 from ..data.settings import PRESETS, DataSettings
 from ..errors import InputError
-from ..models.physics_predictor import ENCODERS, PredictorConfig
+from ..models.encoders import encoder_names
+from ..models.physics_predictor import PredictorConfig
 
 try:  # Python ≥ 3.11
     import tomllib
@@ -417,7 +418,7 @@ def _validate(config: TrainConfig) -> None:
         "data.gs_model",
         "a 3DGS predictor is only used with data.geometry = predicted",
     )
-    _choice(m.encoder, tuple(sorted(ENCODERS)), "model.encoder")
+    _choice(m.encoder, tuple(encoder_names()), "model.encoder")
     _require(
         all(c >= 1 for c in m.encoder_channels) and len(m.encoder_channels) >= 1,
         "model.encoder_channels",

@@ -101,7 +101,6 @@ def photometric_loss(
         substeps = stable_substeps(detached, scenes.x0, frame_dt, min_substeps)
     state = State(scenes.x0, scenes.v0)
     num_frames = frames.shape[1]
-    height, width = frames.shape[2:4]
     losses = []
     for t in range(1, num_frames):
         if (t - 1) % window == 0:
@@ -113,7 +112,7 @@ def photometric_loss(
             means = deform_means(
                 g.means, scenes.x0[b], state.x[b], asset.binding_index, asset.binding_weight
             )
-            camera = Cameras(cameras.K[b : b + 1], cameras.world_to_cam[b : b + 1], width, height)
+            camera = cameras.select(slice(b, b + 1))
             image = render(g.with_means(means), camera, backend=backend).rgb[0]
             losses.append(F.mse_loss(image, frames[b, t]))
     return torch.stack(losses).mean()

@@ -39,12 +39,6 @@ class StaticFitSettings:
     lr_sh0: float = 0.1
 
 
-def select_views(cameras: Cameras, views: Tensor | list[int]) -> Cameras:
-    """A subset of the (unbatched) cameras."""
-    index = torch.as_tensor(views, dtype=torch.int64, device=cameras.K.device)
-    return Cameras(cameras.K[index], cameras.world_to_cam[index], cameras.width, cameras.height)
-
-
 def photometric_loss(
     rendered: Tensor,  # [..., H, W, 3]
     target: Tensor,  # [..., H, W, 3]

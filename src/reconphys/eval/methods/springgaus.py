@@ -104,11 +104,6 @@ def _render_per_frame(
     return render(batch, per_frame).rgb[:, 0]
 
 
-def _select(cameras: Cameras, views: list[int]) -> Cameras:
-    index = torch.as_tensor(views, device=cameras.K.device)
-    return Cameras(cameras.K[index], cameras.world_to_cam[index], cameras.width, cameras.height)
-
-
 class SpringGausMethod(Method):
     name = "springgaus"
     description = (
@@ -287,7 +282,7 @@ class SpringGausMethod(Method):
                 )
                 means = deform_means(gaussians.means, x0, stepped.x[0, 1], index, weight)
                 view = int(torch.randint(0, frames.shape[0], (1,), generator=generator))
-                rendered = render(gaussians.with_means(means), _select(cameras, [view])).rgb[0]
+                rendered = render(gaussians.with_means(means), cameras.select([view])).rgb[0]
                 loss = photometric_loss(rendered, frames[view, t])
                 loss.backward()
                 optimizer.step()
