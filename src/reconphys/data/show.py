@@ -9,6 +9,7 @@ import numpy as np
 
 from ..io import read_npz
 from ..physics import ATTRIBUTES
+from ..render.video import tile_images
 from .storage import read_manifest
 
 SHEET_TILE = 96  # pixels: small renders are enlarged (nearest neighbour) to at least this
@@ -73,9 +74,6 @@ def contact_sheet(
     for i in picks.astype(int):
         frames = read_npz(root / samples[i]["frames"], (f"view_{view}",))[f"view_{view}"]
         times = np.linspace(0, len(frames) - 1, min(columns, len(frames))).round().astype(int)
-        tiles = frames[times]  # [C, H, W, 3]
-        factor = max(1, -(-SHEET_TILE // tiles.shape[1]))
-        tiles = tiles.repeat(factor, 1).repeat(factor, 2)
-        tiles = np.pad(tiles, ((0, 0), (1, 1), (1, 1), (0, 0)), constant_values=60)
-        rows.append(np.concatenate(list(tiles), axis=1))
-    return np.concatenate(rows, axis=0)
+        rows.append(list(frames[times]))
+    factor = max(1, -(-SHEET_TILE // rows[0][0].shape[0]))
+    return tile_images(rows, scale=factor, pad=1, fill=60)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from ..render.video import tile_images
 from .evaluate import INITIAL_SUFFIX, INPUT_FRAMES, Results
 
 COLOURS = [
@@ -249,23 +250,24 @@ def contact_sheet(results: Results, path: Path) -> None:
     for c, frame in enumerate(columns):
         x = label_w + c * (tile_w + 2) + tile_w // 2
         draw.text((x, 4), f"frame {frame}", fill=BLACK, font=font, anchor="mt")
+    tiles = []
     for r, (sample, name) in enumerate(rows):
-        y = header + r * (tile_h + 2)
         if name is None:
             frames, label = results.ground_truth_sheets[sample], f"{sample}\nground truth"
         else:
             found = [x for x in results.results if x.row == name and x.sample == sample]
             frames = found[0].sheet if found else None
             label = name
+        y = header + r * (tile_h + 2)
         draw.multiline_text((6, y + tile_h // 2), label, fill=BLACK, font=font, anchor="lm")
-        for c, frame in enumerate(columns):
-            x = label_w + c * (tile_w + 2)
-            if frames is None or frame >= len(frames):
-                draw.rectangle([x, y, x + tile_w - 1, y + tile_h - 1], fill=(60, 60, 60))
+        tiles.append([None if frames is None or f >= len(frames) else frames[f] for f in columns])
+    grid = tile_images(tiles, SHEET_SCALE, pad=(0, 2, 0, 2), fill=WHITE, blank=(60, 60, 60))
+    image.paste(Image.fromarray(grid), (label_w, header))
+    for r, row in enumerate(tiles):
+        for c, tile in enumerate(row):
+            if tile is None:
+                x, y = label_w + c * (tile_w + 2), header + r * (tile_h + 2)
                 draw.text(
                     (x + tile_w // 2, y + tile_h // 2), "n/a", fill=WHITE, font=font, anchor="mm"
                 )
-                continue
-            tile = Image.fromarray(frames[frame]).resize((tile_w, tile_h), Image.NEAREST)
-            image.paste(tile, (x, y))
     image.save(path)

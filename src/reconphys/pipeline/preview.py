@@ -45,23 +45,20 @@ def contact_sheet(
 ) -> np.ndarray:  # [2H' + SEPARATOR, count·(W' + SEPARATOR), 3] uint8
     """``count`` evenly spaced frames: the recording on top (black past its end), the simulated
     asset below, so each column compares one instant."""
-    from ..render.video import to_uint8
+    from ..render.video import tile_images, to_uint8
 
     num_frames, height, width = simulated.shape[:3]
     picks = np.linspace(0, num_frames - 1, min(count, num_frames)).round().astype(int)
     factor = max(1, math.ceil(PREVIEW_MIN_SIZE / 2 / max(height, width)))
-    top = torch.zeros(len(picks), height, width, 3)
-    for column, t in enumerate(picks):
-        if t < observed.shape[0]:
-            top[column] = observed[t]
-    top, bottom = _enlarge(top, factor), _enlarge(simulated[picks], factor)
-    grey = 0.5
-    rows = []
-    for images in (top, bottom):
-        bar = torch.full((len(picks), images.shape[1], SEPARATOR, 3), grey)
-        rows.append(torch.cat([images, bar], dim=2).permute(1, 0, 2, 3).flatten(1, 2))
-    sheet = torch.cat([rows[0], torch.full((SEPARATOR, rows[0].shape[1], 3), grey), rows[1]])
-    return to_uint8(sheet)
+    # Enlarged by torch's nearest interpolation (as side_by_side), not tile_images' repetition:
+    # the two differ for some factors (41, 47, …), and the preview stays as it was.
+    shown = [t for t in picks if t < observed.shape[0]]  # a prefix of the columns
+    top = list(to_uint8(_enlarge(observed[shown], factor))) if shown else []
+    bottom = list(to_uint8(_enlarge(simulated[picks], factor)))
+    rows = [top + [None] * (len(picks) - len(top)), bottom]
+    grey = 128  # to_uint8(0.5)
+    sheet = tile_images(rows, pad=(0, SEPARATOR, 0, SEPARATOR), fill=grey)
+    return sheet[:-SEPARATOR]  # no bar under the last row
 
 
 def side_by_side(

@@ -1,8 +1,10 @@
-"""Writing rendered frames: mp4 (H.264 through imageio-ffmpeg) and a PNG contact strip."""
+"""Writing rendered frames: mp4 (H.264 through imageio-ffmpeg), PNG images, and the image grid
+(``tile_images``) that every contact sheet and strip is drawn with."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import imageio.v2 as imageio
@@ -54,6 +56,35 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     return path
 
 
+def tile_images(
+    rows: Sequence[Sequence[np.ndarray | None]],  # rows × columns of [H, W, 3] uint8 tiles
+    scale: int = 1,
+    pad: int | tuple[int, int, int, int] = 0,
+    fill: int | tuple[int, int, int] = 0,
+    blank: int | tuple[int, int, int] = 0,
+) -> np.ndarray:  # [rows·(scale·H + pad_h), columns·(scale·W + pad_w), 3] uint8
+    """A grid of equally sized images, each enlarged ``scale`` times (pixel repetition) and padded
+    by ``pad`` pixels (all sides, or ``(top, bottom, left, right)``) in the colour ``fill``; a
+    ``None`` tile is a rectangle of the colour ``blank``. Colours are a grey level or RGB."""
+    top, bottom, left, right = (pad,) * 4 if isinstance(pad, int) else pad
+    height, width = next(t.shape[:2] for row in rows for t in row if t is not None)
+    height, width = height * scale, width * scale
+    cell_h, cell_w = top + height + bottom, left + width + right
+    columns = max(len(row) for row in rows)
+    grid = np.empty((len(rows) * cell_h, columns * cell_w, 3), np.uint8)
+    grid[:] = fill
+    for r, row in enumerate(rows):
+        for c, tile in enumerate(row):
+            y, x = r * cell_h + top, c * cell_w + left
+            if tile is None:
+                grid[y : y + height, x : x + width] = blank
+            else:
+                grid[y : y + height, x : x + width] = (
+                    np.asarray(tile).repeat(scale, 0).repeat(scale, 1)
+                )
+    return grid
+
+
 def write_strip(
     path: str | os.PathLike,
     frames: np.ndarray,  # [T, H, W, 3] uint8
@@ -63,4 +94,4 @@ def write_strip(
     path = Path(path)
     frames = np.asarray(frames)
     picks = np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int)
-    return write_image(path, np.concatenate(list(frames[picks]), axis=1))
+    return write_image(path, tile_images([list(frames[picks])]))

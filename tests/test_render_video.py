@@ -1,0 +1,143 @@
+"""``tile_images`` and the four image grids drawn with it: each must write the same bytes as the
+grid code it replaced (written out inline here as the reference)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image, ImageDraw
+
+from reconphys.data import show
+from reconphys.eval import plots
+from reconphys.pipeline import preview
+from reconphys.render.video import tile_images, to_uint8, write_image, write_strip
+
+
+def _frames(seed: int, count: int, height: int, width: int) -> np.ndarray:  # [T, H, W, 3] uint8
+    return np.random.default_rng(seed).integers(0, 256, (count, height, width, 3), dtype=np.uint8)
+
+
+def test_tile_images_layout():
+    a, b = _frames(0, 2, 2, 3)
+    grid = tile_images([[a, None], [b, a]], scale=2, pad=(1, 0, 0, 2), fill=7, blank=(1, 2, 3))
+    assert grid.shape == (2 * (1 + 4), 2 * (6 + 2), 3)
+    np.testing.assert_array_equal(grid[1:5, 0:6], a.repeat(2, 0).repeat(2, 1))
+    np.testing.assert_array_equal(grid[1:5, 8:14], np.broadcast_to([1, 2, 3], (4, 6, 3)))
+    np.testing.assert_array_equal(grid[6:10, 8:14], a.repeat(2, 0).repeat(2, 1))
+    assert (grid[0] == 7).all() and (grid[:, 6:8] == 7).all() and (grid[:, 14:] == 7).all()
+
+
+def test_write_strip_matches_the_concatenation(tmp_path):
+    frames = _frames(1, 9, 5, 7)
+    picks = np.linspace(0, len(frames) - 1, 6).round().astype(int)
+    old = write_image(tmp_path / "old.png", np.concatenate(list(frames[picks]), axis=1))
+    new = write_strip(tmp_path / "new.png", frames)
+    assert new.read_bytes() == old.read_bytes()
+
+
+def _old_preview_sheet(observed, simulated, count=6):
+    num_frames, height, width = simulated.shape[:3]
+    picks = np.linspace(0, num_frames - 1, min(count, num_frames)).round().astype(int)
+    factor = max(1, math.ceil(preview.PREVIEW_MIN_SIZE / 2 / max(height, width)))
+    top = torch.zeros(len(picks), height, width, 3)
+    for column, t in enumerate(picks):
+        if t < observed.shape[0]:
+            top[column] = observed[t]
+    top, bottom = preview._enlarge(top, factor), preview._enlarge(simulated[picks], factor)
+    rows = []
+    for images in (top, bottom):
+        bar = torch.full((len(picks), images.shape[1], preview.SEPARATOR, 3), 0.5)
+        rows.append(torch.cat([images, bar], dim=2).permute(1, 0, 2, 3).flatten(1, 2))
+    sheet = torch.cat([rows[0], torch.full((preview.SEPARATOR, rows[0].shape[1], 3), 0.5), rows[1]])
+    return to_uint8(sheet)
+
+
+@pytest.mark.parametrize("size", [(4, 5), (3, 3)])  # enlarged 26 and 43 times
+def test_preview_contact_sheet_unchanged(size):
+    generator = torch.Generator().manual_seed(2)
+    observed = torch.rand(4, *size, 3, generator=generator)
+    simulated = torch.rand(11, *size, 3, generator=generator)
+    np.testing.assert_array_equal(
+        preview.contact_sheet(observed, simulated), _old_preview_sheet(observed, simulated)
+    )
+
+
+def test_data_show_contact_sheet_unchanged(monkeypatch):
+    stored = {f"s{i}.npz": {"view_0": _frames(i, 7, 20, 20)} for i in range(5)}
+    samples = [{"frames": name} for name in stored]
+    monkeypatch.setattr(show, "read_manifest", lambda root: {"samples": samples})
+    monkeypatch.setattr(show, "read_npz", lambda path, keys: stored[Path(path).name])
+    rows = []
+    for i in np.unique(np.linspace(0, 4, 4).round()).astype(int):
+        frames = stored[f"s{i}.npz"]["view_0"]
+        tiles = frames[np.linspace(0, 6, 7).round().astype(int)]
+        factor = max(1, -(-show.SHEET_TILE // tiles.shape[1]))
+        tiles = tiles.repeat(factor, 1).repeat(factor, 2)
+        tiles = np.pad(tiles, ((0, 0), (1, 1), (1, 1), (0, 0)), constant_values=60)
+        rows.append(np.concatenate(list(tiles), axis=1))
+    np.testing.assert_array_equal(show.contact_sheet(Path("unused")), np.concatenate(rows, axis=0))
+
+
+def _old_eval_sheet(results, path):
+    names = plots._rows_with_data(results)
+    columns = plots.sheet_columns(results.num_frames)
+    samples = list(results.ground_truth_sheets)
+    height, width = next(iter(results.ground_truth_sheets.values())).shape[1:3]
+    tile_h, tile_w = height * plots.SHEET_SCALE, width * plots.SHEET_SCALE
+    label_w, header = 180, 24
+    rows = [(s, name) for s in samples for name in [None, *names]]
+    image = Image.new(
+        "RGB",
+        (label_w + len(columns) * (tile_w + 2), header + len(rows) * (tile_h + 2)),
+        plots.WHITE,
+    )
+    draw = ImageDraw.Draw(image)
+    font = plots._font(12)
+    for c, frame in enumerate(columns):
+        x = label_w + c * (tile_w + 2) + tile_w // 2
+        draw.text((x, 4), f"frame {frame}", fill=plots.BLACK, font=font, anchor="mt")
+    for r, (sample, name) in enumerate(rows):
+        y = header + r * (tile_h + 2)
+        if name is None:
+            frames, label = results.ground_truth_sheets[sample], f"{sample}\nground truth"
+        else:
+            found = [x for x in results.results if x.row == name and x.sample == sample]
+            frames = found[0].sheet if found else None
+            label = name
+        draw.multiline_text((6, y + tile_h // 2), label, fill=plots.BLACK, font=font, anchor="lm")
+        for c, frame in enumerate(columns):
+            x = label_w + c * (tile_w + 2)
+            if frames is None or frame >= len(frames):
+                draw.rectangle([x, y, x + tile_w - 1, y + tile_h - 1], fill=(60, 60, 60))
+                draw.text(
+                    (x + tile_w // 2, y + tile_h // 2),
+                    "n/a",
+                    fill=plots.WHITE,
+                    font=font,
+                    anchor="mm",
+                )
+                continue
+            tile = Image.fromarray(frames[frame]).resize((tile_w, tile_h), Image.NEAREST)
+            image.paste(tile, (x, y))
+    image.save(path)
+
+
+def test_eval_contact_sheet_unchanged(tmp_path):
+    results = SimpleNamespace(
+        rows=[SimpleNamespace(name=n) for n in ("reconphys", "static", "absent")],
+        results=[
+            SimpleNamespace(row="reconphys", sample="a", sheet=_frames(3, 30, 6, 8)),
+            SimpleNamespace(row="reconphys", sample="b", sheet=None),
+            SimpleNamespace(row="static", sample="a", sheet=_frames(4, 12, 6, 8)),
+        ],
+        num_frames=30,
+        ground_truth_sheets={"a": _frames(5, 30, 6, 8), "b": _frames(6, 30, 6, 8)},
+    )
+    plots.contact_sheet(results, tmp_path / "new.png")
+    _old_eval_sheet(results, tmp_path / "old.png")
+    assert (tmp_path / "new.png").read_bytes() == (tmp_path / "old.png").read_bytes()
