@@ -51,13 +51,10 @@ def test_anchors_are_evenly_spread():
 
 @pytest.mark.parametrize("num_points, count", [(3000, 256), (257, 257)])
 def test_compiled_farthest_point_sampling_matches_the_reference(num_points, count):
-    from reconphys.physics.anchors import (
-        farthest_point_sampling,
-        farthest_point_sampling_reference,
-        numba,
-    )
+    from reconphys._optional import numba_available
+    from reconphys.physics.anchors import farthest_point_sampling, farthest_point_sampling_reference
 
-    if numba is None:
+    if not numba_available():
         pytest.skip("numba not installed: only the reference runs")
     points = torch.rand(num_points, 3, generator=torch.Generator().manual_seed(3)).double()
     points[7] = points[11]  # a duplicate: ties must resolve to the same (first) index

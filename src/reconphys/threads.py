@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import torch
 
+from ._optional import numba_available
+
 
 def set_cpu_threads(threads: int) -> None:
     """Use ``threads`` CPU threads in torch and in Numba (the compiled CPU simulator).
@@ -13,10 +15,8 @@ def set_cpu_threads(threads: int) -> None:
     machine. Numba goes first: its first ``set_num_threads`` starts its OpenMP pool, which resets
     the calling thread's OpenMP thread count — torch's — to Numba's default (all cores).
     """
-    try:
+    if numba_available():
         import numba
-    except ImportError:  # pragma: no cover - Numba is optional
-        pass
-    else:
+
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     torch.set_num_threads(threads)

@@ -15,10 +15,10 @@ import torch
 from scipy import ndimage
 from torch import Tensor
 
-try:  # Numba is optional: farthest-point sampling falls back to the PyTorch loop without it.
+from .._optional import numba_available
+
+if numba_available():  # Numba is optional: farthest-point sampling falls back to the PyTorch loop
     import numba
-except ImportError:  # pragma: no cover - depends on the machine
-    numba = None
 
 
 def seed_from_id(object_id: str) -> int:
@@ -73,7 +73,7 @@ def _fps_py(points, count, first, chosen, distance):
         current = best_index
 
 
-_fps_compiled = numba.njit(cache=True)(_fps_py) if numba is not None else None
+_fps_compiled = numba.njit(cache=True)(_fps_py) if numba_available() else None
 
 
 def farthest_point_sampling(

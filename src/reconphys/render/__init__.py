@@ -13,10 +13,11 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from reconphys._optional import gsplat_available, numba_available
 from reconphys.assets.gaussians import Gaussians
 from reconphys.render.cameras import Cameras, dataset_views, intrinsics_from_fov, look_at
-from reconphys.render.gsplat_backend import gsplat_available, rasterize_gsplat
-from reconphys.render.numba_backend import numba_available, rasterize_numba
+from reconphys.render.gsplat_backend import rasterize_gsplat
+from reconphys.render.numba_backend import rasterize_numba
 from reconphys.render.torch_backend import rasterize_torch
 
 __all__ = [

@@ -10,15 +10,6 @@ from __future__ import annotations
 from torch import Tensor
 
 
-def gsplat_available() -> bool:
-    """Whether gsplat can be imported (it still needs CUDA tensors to render)."""
-    try:
-        import gsplat  # noqa: F401
-    except Exception:  # a broken CUDA extension raises more than ImportError
-        return False
-    return True
-
-
 def rasterize_gsplat(
     means: Tensor,  # [..., N, 3] world frame, metres
     quats: Tensor,  # [..., N, 4] wxyz rotations, not necessarily normalised

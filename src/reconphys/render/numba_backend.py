@@ -31,6 +31,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from .._optional import numba_available
 from .torch_backend import (
     ALPHA_THRESHOLD,
     MAX_ALPHA,
@@ -39,15 +40,8 @@ from .torch_backend import (
     project_images,
 )
 
-try:  # Numba is optional: the torch renderer is used wherever it is missing.
+if numba_available():  # Numba is optional: the torch renderer is used wherever it is missing.
     import numba
-except ImportError:  # pragma: no cover - depends on the machine
-    numba = None
-
-
-def numba_available() -> bool:
-    return numba is not None
-
 
 TILE = 8  # pixels per tile side: small tiles keep the per-pixel lists short
 
@@ -198,7 +192,7 @@ def _backward_py(
                         grad_conics[c, image, g, 2] += grad_power * 0.5 * dy * dy
 
 
-if numba is not None:
+if numba_available():
     _tile_range = numba.njit(cache=True, inline="always")(_tile_range_py)
     _gaussian_at = numba.njit(cache=True, inline="always")(_gaussian_at_py)
     _count = numba.njit(parallel=True, cache=True)(_count_py)
@@ -277,7 +271,7 @@ def rasterize_numba(
     """:func:`torch_backend.rasterize_torch` with the compositing compiled: same inputs, outputs
     (rgb ``[..., C, H, W, D]``, alpha and depth ``[..., C, H, W]``) and gradients; CPU tensors,
     float32 or float64."""
-    if numba is None:
+    if not numba_available():
         raise RuntimeError(
             "the numba renderer needs numba (pip install numba); use backend='torch'"
         )
