@@ -7,12 +7,16 @@ dimensions is allowed (``[..., N, 3]``), e.g. ``[B, N, 3]`` for a batch of scene
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, replace
 
 import torch
 from torch import Tensor
 
+from reconphys.errors import InputError
+
 SH_C0 = 0.28209479177387814  # Y_0^0, maps the SH DC coefficient to an RGB offset around 0.5
+MIN_GAUSSIANS = 16
 
 
 @dataclass
@@ -90,3 +94,17 @@ class Gaussians:
                 if (v := getattr(self, f.name)) is not None
             },
         )
+
+
+def check_sampling_args(num_gaussians: int, size: float, interior_fraction: float) -> None:
+    """The arguments shared by the samplers of a shape into Gaussians (procedural shapes, meshes):
+    ``num_gaussians`` an integer ≥ ``MIN_GAUSSIANS``, ``size`` a positive number of metres,
+    ``interior_fraction`` in [0, 1). Raises ``InputError`` naming the first bad one."""
+    if int(num_gaussians) != num_gaussians or num_gaussians < MIN_GAUSSIANS:
+        raise InputError(
+            f"must be an integer ≥ {MIN_GAUSSIANS}, got {num_gaussians}", field="num_gaussians"
+        )
+    if not (math.isfinite(size) and size > 0):
+        raise InputError(f"must be a positive number of metres, got {size}", field="size")
+    if not 0.0 <= interior_fraction < 1.0:
+        raise InputError(f"must be in [0, 1), got {interior_fraction}", field="interior_fraction")

@@ -15,7 +15,6 @@ position. Every channel is raised to at least ``MIN_COLOR_VALUE`` so nothing rea
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 
@@ -25,10 +24,9 @@ import trimesh
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from reconphys.assets.gaussians import Gaussians
+from reconphys.assets.gaussians import Gaussians, check_sampling_args
 from reconphys.assets.procedural import (
     MIN_COLOR_VALUE,
-    MIN_GAUSSIANS,
     OPACITY,
     TEXTURES,
     surface_and_interior_sigmas,
@@ -206,14 +204,7 @@ def mesh_to_gaussians(
     if texture not in MESH_TEXTURES:
         valid = ", ".join(MESH_TEXTURES)
         raise InputError(f"unknown texture {texture!r}; expected one of: {valid}", field="texture")
-    if int(num_gaussians) != num_gaussians or num_gaussians < MIN_GAUSSIANS:
-        raise InputError(
-            f"must be an integer ≥ {MIN_GAUSSIANS}, got {num_gaussians}", field="num_gaussians"
-        )
-    if not (math.isfinite(size) and size > 0):
-        raise InputError(f"must be a positive number of metres, got {size}", field="size")
-    if not 0.0 <= interior_fraction < 1.0:
-        raise InputError(f"must be in [0, 1), got {interior_fraction}", field="interior_fraction")
+    check_sampling_args(num_gaussians, size, interior_fraction)
     if int(seed) != seed or seed < 0:
         raise InputError(f"must be a non-negative integer, got {seed}", field="seed")
     if isinstance(mesh_or_path, trimesh.Trimesh):

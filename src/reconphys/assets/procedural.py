@@ -16,7 +16,6 @@ a torch nearest-neighbour search was 30× slower on CPU).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -25,7 +24,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
-from reconphys.assets.gaussians import Gaussians
+from reconphys.assets.gaussians import Gaussians, check_sampling_args
 from reconphys.errors import InputError
 
 TEXTURES = ("checker", "stripes", "solid")
@@ -52,7 +51,6 @@ PALETTE = (
     (0.16, 0.32, 0.92),  # blue
     (0.78, 0.20, 0.80),  # magenta
 )
-MIN_GAUSSIANS = 16
 
 SignedDistance = Callable[[Tensor], Tensor]  # points [..., 3] -> signed distance [...]
 
@@ -368,14 +366,7 @@ def make_procedural_gaussians(
     """
     _check_choice(shape, SHAPES, "shape")
     _check_choice(texture, TEXTURES, "texture")
-    if int(num_gaussians) != num_gaussians or num_gaussians < MIN_GAUSSIANS:
-        raise InputError(
-            f"must be an integer ≥ {MIN_GAUSSIANS}, got {num_gaussians}", field="num_gaussians"
-        )
-    if not (math.isfinite(size) and size > 0):
-        raise InputError(f"must be a positive number of metres, got {size}", field="size")
-    if not 0.0 <= interior_fraction < 1.0:
-        raise InputError(f"must be in [0, 1), got {interior_fraction}", field="interior_fraction")
+    check_sampling_args(num_gaussians, size, interior_fraction)
     interior_count = min(round(interior_fraction * num_gaussians), num_gaussians - 2)
     surface_count = num_gaussians - interior_count
 
