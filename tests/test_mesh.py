@@ -189,3 +189,26 @@ def test_pybullet_mesh_paths():
     else:
         paths = pybullet_mesh_paths()
         assert len(paths) > 100 and all(p.suffix == ".obj" and p.is_file() for p in paths)
+
+
+@pytest.mark.parametrize(
+    "bad, field",
+    [
+        ({"num_gaussians": 15}, "num_gaussians"),
+        ({"num_gaussians": 100.5}, "num_gaussians"),
+        ({"size": 0.0}, "size"),
+        ({"size": float("nan")}, "size"),
+        ({"interior_fraction": -0.1}, "interior_fraction"),
+    ],
+)
+def test_meshes_and_procedural_shapes_check_the_same_arguments(bad, field):
+    from reconphys.assets.procedural import make_procedural_gaussians
+
+    arguments = {"num_gaussians": 100, "size": SIZE, "interior_fraction": 0.3, **bad}
+    for sample in (
+        lambda: mesh_to_gaussians(trimesh.creation.box(BOX_EXTENTS), **arguments),
+        lambda: make_procedural_gaussians("sphere", **arguments),
+    ):
+        with pytest.raises(InputError) as info:
+            sample()
+        assert info.value.field == field
