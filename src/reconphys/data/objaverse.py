@@ -23,7 +23,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..io import atomic_file
 from .settings import DataSettings
-from .sources import ObjectRef, load_file_object
+from .source_base import ObjectRef, load_file_object
 
 DEFAULT_ROOT = Path("~/.objaverse/hf-objaverse-v1").expanduser()
 BASE_URL = "https://huggingface.co/datasets/allenai/objaverse/resolve/main"

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import InputError
 from ..physics import seed_from_id
 from .settings import DataSettings
-from .sources import ObjectRef
+from .source_base import ObjectRef
 
 SPLITS = ("train", "test")
 

@@ -10,38 +10,23 @@ dataset seed, so an object looks the same in every dataset that draws it.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from ..assets.gaussians import Gaussians
-from ..assets.mesh import MESH_SUFFIXES, mesh_to_gaussians, pybullet_mesh_paths
+from ..assets.mesh import MESH_SUFFIXES, pybullet_mesh_paths
 from ..assets.normalize import normalize_gaussians
-from ..assets.ply import read_ply
 from ..assets.procedural import SHAPES, make_procedural_gaussians
 from ..errors import InputError
-from ..physics import seed_from_id
 from .settings import DataSettings
+from .source_base import ObjectRef, load_file_object, object_seed
 
 # Procedural objects vary by texture and by an anisotropic stretch of each axis in this range
 # (then renormalised), so that two variants of one shape differ in proportions and look.
 PROCEDURAL_TEXTURES = ("checker", "stripes")  # "solid" would hide rotation
 PROCEDURAL_STRETCH = (0.65, 1.0)
-
-
-@dataclass(frozen=True)
-class ObjectRef:
-    """One candidate object: ``id`` is stable and unique within its source."""
-
-    id: str  # e.g. "bunny-0003", "random_urdfs/000/000.obj", "objaverse/<uid>"
-    path: str = ""  # file the object is read from (empty for procedural shapes)
-
-
-def object_seed(object_id: str, purpose: str) -> int:
-    """A 31-bit seed for one purpose (``"gaussians"``, ...) of one object."""
-    return seed_from_id(f"{purpose}:{object_id}") % (2**31)
 
 
 class ProceduralSource:
@@ -73,35 +58,6 @@ class ProceduralSource:
         )
         stretched = g.means * torch.tensor(variant["stretch"], dtype=g.means.dtype)
         return normalize_gaussians(g.with_means(stretched), settings.size)
-
-
-def _is_gaussian_ply(path: Path) -> bool:
-    """True when a .ply file holds 3DGS Gaussians (has f_dc_0 / opacity) rather than a mesh."""
-    try:
-        with open(path, "rb") as f:
-            header = f.read(4096)
-    except OSError as e:
-        raise InputError(f"cannot read ({e.strerror})", source=str(path)) from None
-    return b"f_dc_0" in header and b"opacity" in header
-
-
-def load_file_object(path: Path, object_id: str, settings: DataSettings) -> Gaussians:
-    """A mesh (.obj/.glb/.ply/...) or a 3DGS Gaussian PLY → normalised Gaussians.
-
-    Gaussian PLYs keep their own Gaussians (a seeded random subset of ``settings.num_gaussians``
-    when they hold more); meshes are sampled by ``mesh_to_gaussians`` (mesh colours when they vary,
-    else a procedural checker).
-    """
-    seed = object_seed(object_id, "gaussians")
-    if path.suffix.lower() == ".ply" and _is_gaussian_ply(path):
-        g = read_ply(path)
-        if g.num_gaussians > settings.num_gaussians:
-            keep = np.random.default_rng(seed).permutation(g.num_gaussians)[
-                : settings.num_gaussians
-            ]
-            g = g.select(torch.from_numpy(np.sort(keep)))
-        return normalize_gaussians(g, settings.size)
-    return mesh_to_gaussians(path, settings.num_gaussians, seed=seed, size=settings.size)
 
 
 class FolderSource:
