@@ -26,6 +26,7 @@ import torch.nn.functional as F
 from ..capture.masks import subtract_background
 from ..data.dataset import DropDataset
 from ..errors import InputError
+from ..io import atomic_file
 from ..models.gaussian_predictor import GaussianPredictor, GaussianPredictorConfig
 from ..models.gaussian_shipped import save_gaussian_predictor
 from ..render import Cameras, render
@@ -172,9 +173,8 @@ def train_gaussian_predictor(
                 "step": step,
                 "settings": asdict(settings),
             }
-            tmp = checkpoint_path.with_suffix(".tmp")
-            torch.save(state, tmp)
-            tmp.replace(checkpoint_path)
+            with atomic_file(checkpoint_path) as tmp:
+                torch.save(state, tmp)
         if stop_after is not None and step >= stop_after:
             return out
     training = {
