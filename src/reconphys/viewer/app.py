@@ -418,7 +418,7 @@ class ViewerApp:
         ).start()
 
     def _save_recording(self, recording, folder: Path, camera, height: int) -> None:
-        from .recording import write_recording
+        from ..interact.recording import write_recording
 
         frames = recording.anchors.shape[0]
 

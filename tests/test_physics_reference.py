@@ -18,7 +18,7 @@ from reconphys.physics import (
     spring_energy,
     stable_substeps,
 )
-from reconphys.physics.cpu_kernels import numba_available
+from reconphys.physics.numba_backend import numba_available
 
 G = 9.8
 
