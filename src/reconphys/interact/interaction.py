@@ -8,7 +8,9 @@ directly; the viewer's :class:`~reconphys.viewer.session.ViewerSession` adds a l
 background thread.
 
 The fields that a frame reads and publishes are touched only inside ``with self._lock`` (a no-op
-here; the viewer's session puts a real lock there), so the same methods serve both.
+here; the viewer's session puts a real lock there), so the same methods serve both. The module is
+a little over 400 lines because it is one class: the whole user-facing surface of an interaction
+(state, attributes, grips, recording, stepping), each method short.
 """
 
 from __future__ import annotations
