@@ -29,14 +29,13 @@ import torch
 from reconphys.data.generate import dataset_cameras, render_views
 from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.render.video import to_uint8
-from reconphys.simulate import simulate_asset
 from reconphys.threads import set_cpu_threads
 from reconphys.train.config import DataConfig
 from reconphys.train.data import TrainingSamples
 
 
 def video(asset, settings, frames: int, view: int) -> torch.Tensor:  # [T, H, W, 3] in [0, 1]
-    trajectory = simulate_asset(asset, frames - 1, torch.device("cpu"))
+    trajectory = asset.simulate(frames - 1, torch.device("cpu"))
     rgb = render_views(asset, trajectory.x[0], dataset_cameras(settings))
     return torch.from_numpy(to_uint8(rgb)[view]).float() / 255
 

@@ -22,9 +22,9 @@ import math
 import torch
 from common import machine_description, timed
 
+from reconphys._optional import numba_available
 from reconphys.physics import SpringMassModel, State, knn_springs, rollout, sample_volume_anchors
-from reconphys.physics.cpu_kernels import numba_available
-from reconphys.physics.fused import fused_usable
+from reconphys.physics.triton_backend import fused_usable
 
 GRID = [(b, n, k) for b in (1, 8, 32) for n in (512, 2048) for k in (16, 32)]
 CONFIGS = {"cpu": GRID, "cuda": GRID}

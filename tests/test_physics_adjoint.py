@@ -6,9 +6,6 @@ import pytest
 import torch
 
 from reconphys.physics import SpringMassModel, State, knn_springs, rollout, sample_volume_anchors
-from reconphys.physics.cpu_kernels import numba_available
-from reconphys.physics.integrator import choose_method
-from reconphys.physics.state import Control
 
 F64 = torch.float64
 
@@ -104,41 +101,3 @@ def test_broadcast_state_and_scalar_attributes_reduce_like_autograd():
     for name, expected in grads_ref.items():
         assert grads_adj[name].shape == expected.shape, name
         torch.testing.assert_close(grads_adj[name], expected, rtol=1e-11, atol=1e-14)
-
-
-def test_method_choice():
-    springs, rest, x0, v0, attributes = small_system(batch=1, dtype=torch.float32)
-    model = SpringMassModel(springs, rest, **attributes)
-    state = State(x0, v0)
-    forward_only = "numba" if numba_available() else "autograd"
-    assert choose_method("auto", model, state) == forward_only  # nothing needs a gradient
-    grad_state = State(x0, v0.clone().requires_grad_(True))
-    assert choose_method("auto", model, grad_state) == "adjoint"
-    with torch.no_grad():
-        assert choose_method("auto", model, grad_state) == forward_only
-    control = Control(force=torch.zeros_like(x0))
-    assert choose_method("auto", model, grad_state, control) == "autograd"
-    assert choose_method("auto", model, state, control) == forward_only
-    with pytest.raises(ValueError, match="control"):
-        choose_method("adjoint", model, state, control)
-    with pytest.raises(ValueError, match="method"):
-        choose_method("warp", model, state)
-
-
-def test_environment_overrides_auto(monkeypatch):
-    springs, rest, x0, v0, attributes = small_system(batch=1, dtype=torch.float32)
-    model = SpringMassModel(springs, rest, **attributes)
-    state = State(x0, v0.clone().requires_grad_(True))
-    monkeypatch.setenv("RECONPHYS_SIMULATOR", "autograd")
-    assert choose_method("auto", model, state) == "autograd"
-    monkeypatch.setenv("RECONPHYS_SIMULATOR", "bogus")
-    with pytest.raises(ValueError, match="RECONPHYS_SIMULATOR"):
-        choose_method("auto", model, state)
-
-
-def test_fused_on_cpu_needs_the_interpreter(monkeypatch):
-    monkeypatch.delenv("TRITON_INTERPRET", raising=False)
-    springs, rest, x0, v0, attributes = small_system(batch=1, dtype=torch.float32)
-    model = SpringMassModel(springs, rest, **attributes)
-    with pytest.raises(ValueError, match="fused"):
-        choose_method("fused", model, State(x0, v0))

@@ -23,14 +23,21 @@ def asset_dir(tmp_path_factory):
     return out
 
 
-def test_asset_simulate_equals_simulate_asset(asset_dir):
+def test_asset_simulate_equals_the_rollout(asset_dir):
     from reconphys import Asset, read_asset
-    from reconphys.simulate import simulate_asset
+    from reconphys.physics import rollout
 
     asset = read_asset(asset_dir)
     assert isinstance(asset, Asset)
     trajectory = asset.simulate(6)
-    reference = simulate_asset(asset, 6, torch.device("cpu"))
+    with torch.no_grad():
+        reference = rollout(
+            asset.model(),
+            asset.initial_state(),
+            6,
+            frame_dt=asset.physics.frame_dt,
+            min_substeps=asset.physics.substeps,
+        )
     assert trajectory.x.shape == (1, 7, 40, 3)
     torch.testing.assert_close(trajectory.x, reference.x, rtol=0, atol=0)
     torch.testing.assert_close(trajectory.v, reference.v, rtol=0, atol=0)

@@ -20,7 +20,6 @@ from reconphys.models.shipped import ENV_VAR, SHIPPED_PATH, load_predictor
 from reconphys.physics import ATTRIBUTES
 from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.render.video import to_uint8
-from reconphys.simulate import simulate_asset
 from reconphys.threads import set_cpu_threads
 
 
@@ -44,7 +43,7 @@ def test_shipped_model_is_found_without_flags(model, monkeypatch):
 
 
 def _video(asset, settings, model) -> torch.Tensor:  # [1, T, H, W, 3] of the model's view
-    trajectory = simulate_asset(asset, model.num_frames - 1, torch.device("cpu"))
+    trajectory = asset.simulate(model.num_frames - 1, torch.device("cpu"))
     rgb = render_views(asset, trajectory.x[0], dataset_cameras(settings))
     video = torch.from_numpy(to_uint8(rgb)).float() / 255  # [V, T, H, W, 3]
     return video[model.view : model.view + 1]

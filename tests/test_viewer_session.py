@@ -17,12 +17,12 @@ from reconphys.assets.normalize import place_on_ground
 from reconphys.assets.procedural import make_procedural_gaussians
 from reconphys.cli import app
 from reconphys.errors import InputError
+from reconphys.interact import interaction as interaction_module
+from reconphys.interact.recording import write_recording
+from reconphys.interact.script import run_script
 from reconphys.physics import stable_substeps
-from reconphys.viewer import ViewerSession, pick_point, run_script
-from reconphys.viewer import session as session_module
-from reconphys.viewer.grips import grip_coefficients
-from reconphys.viewer.recording import write_recording
-from reconphys.viewer.session import simulate_frame
+from reconphys.physics.control import simulate_frame
+from reconphys.viewer import ViewerSession
 
 
 def make_small_asset(num_gaussians: int = 800, num_anchors: int = 96, height: float = 0.05):
@@ -79,14 +79,6 @@ def test_attributes_and_substeps_respect_the_stability_bound(asset):
         session.set_substeps(0)
 
 
-def test_pick_finds_the_first_point_along_the_ray():
-    points = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, 2.0], [0.5, 0.0, 0.5]])
-    down = torch.tensor([0.0, 0.0, -1.0])
-    assert pick_point(points, torch.tensor([0.0, 0.0, 5.0]), down, 0.01) == 1
-    assert pick_point(points, torch.tensor([0.0, 0.0, 1.5]), down, 0.01) == 0
-    assert pick_point(points, torch.tensor([0.2, 0.0, 5.0]), down, 0.01) is None
-
-
 @pytest.mark.parametrize("simulator", ["auto", "autograd"])  # compiled substeps / torch step
 def test_grab_lifts_the_held_anchors_without_exploding(asset, simulator, monkeypatch):
     monkeypatch.setenv("RECONPHYS_SIMULATOR", simulator)
@@ -122,13 +114,6 @@ def test_grip_speed_is_capped(asset):
     session.advance(2)
     travelled = session.grips()[name]["position"] - asset.x0[0]
     assert float(travelled[0]) == pytest.approx(2 * 1.0 * 0.03, rel=1e-4)
-
-
-def test_grip_springs_fit_the_stability_budget():
-    k, d = grip_coefficients(torch.tensor([2.0]), substep=1e-3)
-    h = 1e-3
-    omega_sq, rate = float(k[0]) / 2.0, float(d[0]) / 2.0
-    assert h * h * omega_sq + 2 * h * rate < 4 * 0.3  # the headroom stable_substeps leaves
 
 
 def test_two_grips_stretch_the_object(asset):
@@ -175,7 +160,7 @@ def test_background_loop_runs_and_never_blocks_callers(asset, monkeypatch):
         time.sleep(0.5)
         return simulate_frame(*args)
 
-    monkeypatch.setattr(session_module, "simulate_frame", slow_frame)
+    monkeypatch.setattr(interaction_module, "simulate_frame", slow_frame)
     session = ViewerSession(asset, realtime=False)
     session.start()
     try:

@@ -179,62 +179,6 @@ def make_asset(
     )
 
 
-def _simulate_to(
-    asset,
-    out: Path,
-    frames: int | None,
-    render_video: bool,
-    device,
-    resolution,
-    view,
-    backend,
-    save_gaussians: bool,
-    steps: list[dict] | None = None,
-) -> dict:
-    """Simulate (``steps``: a controller script, run as by ``view --script``; ``frames`` is then
-    the total or None for the script's own length) and write trajectory.npz, the mp4 and the
-    preview strip into ``out`` (and interaction.json for a script)."""
-    from .render.video import to_uint8, write_mp4, write_strip
-    from .simulate import (
-        default_view,
-        gaussian_centres,
-        render_frames,
-        simulate_asset,
-        simulate_script,
-        write_trajectory,
-    )
-
-    started = time.perf_counter()
-    recording = None
-    if steps is None:
-        trajectory = simulate_asset(asset, frames, device, progress=True)
-    else:
-        trajectory, recording = simulate_script(asset, steps, device, frames)
-    sim_seconds = time.perf_counter() - started
-    anchors = trajectory.x[0].to(device)  # [T+1, N_A, 3]
-    means = gaussian_centres(asset, anchors) if save_gaussians else None
-    out.mkdir(parents=True, exist_ok=True)
-    write_trajectory(out / "trajectory.npz", trajectory, means)
-    summary = {
-        "frames": anchors.shape[0] - 1,
-        "substeps_used": trajectory.substeps,
-        "simulate_seconds": round(sim_seconds, 3),
-        "lowest_z_m": float(anchors[..., 2].min()),
-    }
-    if recording is not None:
-        from .viewer.recording import write_interaction
-
-        write_interaction(out / "interaction.json", recording)
-    if render_video:
-        camera = default_view(resolution, resolution, view)
-        started = time.perf_counter()
-        images = to_uint8(render_frames(asset, anchors, camera, backend, progress=True))
-        summary["render_seconds"] = round(time.perf_counter() - started, 3)
-        write_mp4(out / "simulation.mp4", images, fps=1.0 / asset.physics.frame_dt)
-        write_strip(out / "preview.png", images)
-    return summary
-
-
 @app.command()
 @user_errors
 def simulate(
@@ -266,8 +210,9 @@ def simulate(
     unless --no-render, OUT/simulation.mp4 and OUT/preview.png from a dataset view. --script or
     --push drive it with the viewer's controller (grips) and add OUT/interaction.json."""
     from .assets.asset import read_asset
-    from .simulate import resolve_device
-    from .viewer.script import load_script, parse_vector, push_script
+    from .devices import resolve_device
+    from .interact.script import load_script, parse_vector, push_script
+    from .simulate import simulate_to_folder
 
     if frames is not None and frames < 1:
         raise InputError(f"must be ≥ 1, got {frames}", field="--frames")
@@ -288,7 +233,7 @@ def simulate(
     torch_device = resolve_device(device)
     asset = read_asset(asset_dir)
     try:
-        summary = _simulate_to(
+        summary = simulate_to_folder(
             asset,
             out,
             frames,
@@ -373,7 +318,8 @@ def demo(
     """Build a procedural object, drop it, and write OUT/asset, OUT/trajectory.npz and an mp4."""
     from .assets.asset import PhysicsSettings, read_asset, write_asset
     from .assets.procedural import make_procedural_gaussians
-    from .simulate import resolve_device
+    from .devices import resolve_device
+    from .simulate import simulate_to_folder
 
     torch_device = resolve_device(device)
     started = time.perf_counter()
@@ -396,7 +342,9 @@ def demo(
         f"anchors, {asset.springs.shape[0]} springs) in {time.perf_counter() - started:.1f} s"
     )
     asset = read_asset(asset_dir)  # simulate what was written: the file format is the contract
-    summary = _simulate_to(asset, out, frames, True, torch_device, resolution, 0, "auto", False)
+    summary = simulate_to_folder(
+        asset, out, frames, True, torch_device, resolution, 0, "auto", False
+    )
     typer.echo(json.dumps(summary))
     typer.echo(f"video: {out / 'simulation.mp4'}   preview: {out / 'preview.png'}")
 
@@ -571,7 +519,7 @@ def view(
     """Open ASSET in a browser viewer: live simulation; drop, grab, squeeze and stretch it
     (needs the `viewer` extra). With --script: the same controls, headless, from a file."""
     from .assets.asset import read_asset
-    from .simulate import resolve_device
+    from .devices import resolve_device
     from .viewer.command import view_command
 
     if not 0 <= port < 65536:
@@ -622,11 +570,11 @@ def evaluate(
 
     Writes OUT/metrics.json, OUT/report.md, OUT/summary.csv, OUT/per_sample.csv,
     OUT/per_frame.csv and figures (PSNR per frame, attribute scatter, contact sheet)."""
+    from .devices import resolve_device
     from .eval.evaluate import EvalSettings, run_evaluation
     from .eval.methods import parse_methods
     from .eval.report import check_output, write_report
     from .eval.samples import EvalSet
-    from .simulate import resolve_device
 
     names = parse_methods(methods)
     _check_positive(budget_seconds, "--budget-seconds")

@@ -62,8 +62,8 @@ def predict_command(
     """Predict a simulation-ready asset from one recording of a dropped object: OUT gets the
     asset (gaussians.ply, anchors.npz, binding.npz, physics.json), preview.mp4/.png (observed |
     simulated) and prediction.json (attributes, timings, how each input was read)."""
+    from .devices import resolve_device
     from .pipeline.predict import predict, write_outputs
-    from .simulate import resolve_device
 
     if out.exists() and not overwrite:
         raise InputError("already exists (use --overwrite to replace it)", source=str(out))

@@ -30,7 +30,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from ..physics import SpringMassModel, State, Trajectory
+from ..physics import SpringMassModel, State, Trajectory, deform_means, rollout
 from .gaussians import Gaussians
 from .ply import read_ply, write_ply
 
@@ -105,21 +105,49 @@ class Asset:
     def initial_state(self, device=None, dtype: torch.dtype = torch.float32) -> State:
         return State(self.x0[None].to(device, dtype), self.v0[None].to(device, dtype))
 
-    def simulate(self, frames: int, device: torch.device | str = "cpu") -> Trajectory:
+    def simulate(
+        self, frames: int, device: torch.device | str = "cpu", progress: bool = False
+    ) -> Trajectory:
         """Roll the spring-mass system forward ``frames`` frames from the initial state, exactly
-        as ``reconphys simulate`` does (:func:`reconphys.simulate.simulate_asset`, float32, the
-        asset's substeps raised to the stability bound).
+        as ``reconphys simulate`` does (float32, the asset's substeps raised to the stability
+        bound; ``progress`` shows a progress bar).
 
         Returns a :class:`~reconphys.physics.Trajectory`: ``x``, ``v [1, frames+1, N_A, 3]`` (m,
         m/s; frame 0 is the initial state), ``substeps`` and ``frame_dt`` (s). Raises
         :class:`~reconphys.errors.InputError` if the result is not finite. On CPU, call
         ``torch.set_flush_denormal(True)`` first for speed (docs/physics.md).
         """
-        from ..simulate import simulate_asset  # simulate.py imports this module
-
         if int(frames) < 1:
             raise InputError(f"must be ≥ 1, got {frames}", field="frames")
-        return simulate_asset(self, int(frames), torch.device(device))
+        device = torch.device(device)
+        model = self.model(device)
+        state = self.initial_state(device)
+        with torch.no_grad():
+            trajectory = rollout(
+                model,
+                state,
+                int(frames),
+                frame_dt=self.physics.frame_dt,
+                min_substeps=self.physics.substeps,
+                progress=progress,
+            )
+        if not torch.isfinite(trajectory.x).all():
+            raise InputError("simulation produced NaN: the attributes are unstable")
+        return trajectory
+
+    def gaussian_means(
+        self,
+        anchors: Tensor,  # [..., N_A, 3] anchor positions (e.g. per frame [T, N_A, 3]), metres
+    ) -> Tensor:  # [..., N, 3] metres, on anchors' device
+        """Gaussian centres following the anchors through the asset's binding (DESIGN §4)."""
+        device = anchors.device
+        return deform_means(
+            self.gaussians.means.to(device),
+            self.x0.to(device),
+            anchors,
+            self.binding_index.to(device),
+            self.binding_weight.to(device),
+        )
 
     def total_mass(self) -> float:
         if "mass" in self.per_element:

@@ -70,9 +70,9 @@ class CameraSpec:
 
 def default_camera(width: int, height: int, view: int = 0) -> CameraSpec:
     """The dataset's view ``view`` at ``width × height`` (DESIGN §3)."""
-    from ..simulate import default_view
+    from ..render.cameras import dataset_view
 
-    camera = default_view(width, height, view)
+    camera = dataset_view(width, height, view)
     return CameraSpec(camera.K[0], camera.world_to_cam[0], width, height)
 
 

@@ -14,7 +14,6 @@ import torch
 from ..assets.asset import Asset
 from ..render import Cameras, dataset_views, render
 from ..render.video import to_uint8
-from ..simulate import gaussian_centres, simulate_asset
 from .objects import CanonicalObject, Placement, place, sample_asset
 from .sampling import SampleSpec, contact_frame, draw_sample
 from .settings import DataSettings
@@ -63,7 +62,7 @@ def render_views(
     with torch.no_grad():
         for start in range(0, anchors.shape[0], FRAMES_PER_RENDER_CALL):
             part = anchors[start : start + FRAMES_PER_RENDER_CALL]
-            means = gaussian_centres(asset, part)  # [t, N, 3]
+            means = asset.gaussian_means(part)  # [t, N, 3]
             batch = gaussians.map(lambda t, n=part.shape[0]: t.expand(n, *t.shape))
             chunks.append(render(batch.with_means(means), cameras).rgb)  # [t, C, H, W, 3]
     return torch.cat(chunks).transpose(0, 1)
@@ -78,7 +77,7 @@ def generate_sample(
     spec = draw_sample(settings, obj.id, sample_index)
     placement = place(obj, spec)
     asset = sample_asset(obj, spec, placement, settings)
-    trajectory = simulate_asset(asset, settings.num_frames - 1, torch.device(device))
+    trajectory = asset.simulate(settings.num_frames - 1, torch.device(device))
     anchors = trajectory.x[0]  # [T, N_A, 3]
     cameras = dataset_cameras(settings)
     frames = to_uint8(render_views(asset, anchors, cameras))

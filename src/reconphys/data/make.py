@@ -19,6 +19,7 @@ from pathlib import Path
 
 import torch
 
+from ..devices import resolve_device
 from ..errors import InputError
 from ..io import read_json, remove_stale_staging
 from ..threads import set_cpu_threads
@@ -51,12 +52,6 @@ class MakeReport:
     generated: int  # samples written by this run
     skipped: int  # samples already complete on disk
     seconds: float
-
-
-def resolve_device(name: str) -> str:
-    from ..simulate import resolve_device as resolve
-
-    return str(resolve(name))
 
 
 def _check_settings(root: Path, name: str, settings: DataSettings) -> None:
@@ -160,7 +155,7 @@ def make_dataset(
     root = Path(out)
     if root.exists() and not root.is_dir():
         raise InputError("exists and is not a folder", source=str(root))
-    device = resolve_device(device)
+    device = str(resolve_device(device))
     workers = default_workers(device) if workers in (None, 0) else workers
     if workers < 1:
         raise InputError(f"must be ≥ 0 (0: automatic), got {workers}", field="--workers")

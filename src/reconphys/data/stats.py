@@ -11,7 +11,6 @@ from collections.abc import Iterator
 
 import torch
 
-from ..simulate import simulate_asset
 from .objects import build_object, place, sample_asset
 from .plan import plan_objects, plan_samples
 from .sampling import contact_frame, draw_sample
@@ -35,5 +34,5 @@ def simulated_contact_frames(
             )
         spec = draw_sample(settings, current.id, planned.index)
         asset = sample_asset(current, spec, place(current, spec), settings)
-        trajectory = simulate_asset(asset, settings.num_frames - 1, torch.device(device))
+        trajectory = asset.simulate(settings.num_frames - 1, torch.device(device))
         yield planned.id, contact_frame(trajectory.x[0].cpu().numpy())

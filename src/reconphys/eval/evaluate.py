@@ -28,7 +28,6 @@ from ..assets.gaussians import Gaussians
 from ..errors import InputError
 from ..render import Cameras, render
 from ..render.video import to_uint8
-from ..simulate import gaussian_centres, simulate_asset
 from .lpips import load_lpips
 from .methods import METHODS, Method, MethodOptions, Prediction
 from .metrics import (
@@ -123,9 +122,9 @@ def predicted_means(
 ) -> tuple[Gaussians, Tensor]:  # Gaussians [N], centres [T', N, 3]
     """The Gaussians and their centres per frame that a prediction implies."""
     if prediction.asset is not None:
-        trajectory = simulate_asset(prediction.asset, num_frames - 1, device)
+        trajectory = prediction.asset.simulate(num_frames - 1, device)
         with torch.no_grad():
-            means = gaussian_centres(prediction.asset, trajectory.x[0])
+            means = prediction.asset.gaussian_means(trajectory.x[0])
         return prediction.asset.gaussians, means
     if prediction.gaussians is None or prediction.means is None:
         raise ValueError("a prediction needs an asset, or Gaussians and their centres")

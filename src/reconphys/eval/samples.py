@@ -22,7 +22,6 @@ from ..data.settings import DataSettings
 from ..errors import InputError
 from ..physics import ATTRIBUTE_RANGES, ATTRIBUTES
 from ..render import Cameras
-from ..simulate import gaussian_centres
 
 SPLITS = ("test", "train", "all")
 
@@ -129,7 +128,7 @@ class EvalSet:
             item["K"], item["world_to_cam"], meta["cameras"]["width"], meta["cameras"]["height"]
         )
         with torch.no_grad():
-            means = gaussian_centres(asset, anchors)
+            means = asset.gaussian_means(anchors)
         return EvalSample(
             id=item["id"],
             object=item["object"],

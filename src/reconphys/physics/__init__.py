@@ -1,20 +1,27 @@
 """Differentiable spring-mass physics: model (topology + attributes), state, stepping, anchors,
-binding. See DESIGN §4 for the exact equations."""
+binding, controllers. See DESIGN §4 for the exact equations.
+
+- :mod:`.reference`: the plain PyTorch substep (:func:`step`), forces, contact and energies.
+- :mod:`.stability`: the stable substep count.
+- :mod:`.engine`: the engine interface; :mod:`.torch_backend`, :mod:`.triton_backend` and
+  :mod:`.numba_backend` implement it; :mod:`.adjoint` is the engine-generic exact backward.
+- :mod:`.rollout`: frames of substeps with the engine that suits the call.
+- :mod:`.control`: grips and the frame stepper of interactive use.
+"""
 
 from .anchors import sample_volume_anchors, seed_from_id
 from .binding import compute_binding, deform_means
-from .integrator import (
-    Trajectory,
+from .model import ATTRIBUTE_RANGES, ATTRIBUTES, GRAVITY, SpringMassModel, knn_springs
+from .reference import (
     ground_contact,
     kinetic_energy,
     potential_energy,
-    rollout,
     spring_energy,
     spring_forces,
-    stable_substeps,
     step,
 )
-from .model import ATTRIBUTE_RANGES, ATTRIBUTES, GRAVITY, SpringMassModel, knn_springs
+from .rollout import Trajectory, rollout
+from .stability import stable_substeps
 from .state import Control, State
 
 __all__ = [

@@ -33,7 +33,7 @@ from ..capture.placement import (
     silhouette_iou,
 )
 from ..errors import InputError
-from ..physics import ATTRIBUTES as ATTRIBUTE_ORDER
+from ..physics import ATTRIBUTES
 from .model_input import predictor_frames
 from .settings import DEFAULT_NUM_ANCHORS
 
@@ -54,7 +54,7 @@ class PredictResult:
     def summary(self) -> dict:
         physics = self.asset.physics
         return {
-            "attributes": {n: getattr(physics, n) for n in ATTRIBUTE_ORDER},
+            "attributes": {n: getattr(physics, n) for n in ATTRIBUTES},
             "feed_forward": self.attributes,
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             **self.details,
@@ -359,7 +359,7 @@ def predict_observation(
             predictor.model.config.resolution,
         )
         out = predictor.model(frames.to(predictor.device))
-    attributes = {name: float(out[name][0]) for name in ATTRIBUTE_ORDER}
+    attributes = {name: float(out[name][0]) for name in ATTRIBUTES}
     timings["physics_network"] = time.perf_counter() - started
 
     started = time.perf_counter()

@@ -32,10 +32,11 @@ def _enlarge(images: Tensor, factor: int) -> Tensor:  # [T, H, W, 3] → [T, fH,
 def simulate_and_render(
     asset: Asset, observation: Observation, num_frames: int, device="cpu", backend="auto"
 ) -> Tensor:  # [num_frames, H, W, 3] frames 0..num_frames−1 in the recording's camera
-    from ..simulate import render_frames, simulate_asset
+    from ..render.sequence import render_sequence
 
-    trajectory = simulate_asset(asset, num_frames - 1, torch.device(device))
-    return render_frames(asset, trajectory.x[0], observation.camera.cameras(), backend).cpu()
+    trajectory = asset.simulate(num_frames - 1, torch.device(device))
+    means = asset.gaussian_means(trajectory.x[0])
+    return render_sequence(asset.gaussians, means, observation.camera.cameras(), backend).cpu()
 
 
 def contact_sheet(

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from ..errors import InputError
+
 
 @dataclass
 class Cameras:
@@ -189,3 +191,11 @@ def dataset_views(
         width=width,
         height=height,
     )
+
+
+def dataset_view(width: int, height: int, view: int = 0) -> Cameras:
+    """Dataset view ``view`` (0–3: azimuth 0°, 90°, 180°, 270°) as a single camera (C = 1)."""
+    if not 0 <= view < 4:
+        raise InputError(f"expected 0, 1, 2 or 3, got {view}", field="--view")
+    cameras = dataset_views(width, height)
+    return Cameras(cameras.K[view : view + 1], cameras.world_to_cam[view : view + 1], width, height)

@@ -32,7 +32,7 @@ from ..data.sampling import draw_sample
 from ..data.settings import DataSettings, make_settings
 from ..data.storage import read_manifest
 from ..errors import InputError
-from ..physics import ATTRIBUTES as ATTRIBUTE_ORDER
+from ..physics import ATTRIBUTES
 from .config import GENERATE, DataConfig
 
 GEOMETRY = "ground truth (the dataset's canonical Gaussians, anchors and springs)"
@@ -49,7 +49,7 @@ class Batch:
     frames: Tensor  # [B, T, H, W, 3] float32 in [0, 1], frames 0..T−1 of the input view
     K: Tensor  # [B, 3, 3] intrinsics in pixels at resolution H
     world_to_cam: Tensor  # [B, 4, 4] OpenCV convention, metres
-    attributes: Tensor  # [B, 4] true mass, stiffness, damping, friction (ATTRIBUTE_ORDER)
+    attributes: Tensor  # [B, 4] true mass, stiffness, damping, friction (ATTRIBUTES)
     assets: list[Asset]  # the samples' placed objects (geometry + initial state)
     ids: list[str]
 
@@ -216,7 +216,7 @@ class TrainingSamples(Dataset):
     def medians(self) -> dict[str, float]:
         """Median of each attribute over the samples: the trivial predictor of this data."""
         attributes = self.true_attributes()
-        return {n: float(statistics.median(a[n] for a in attributes)) for n in ATTRIBUTE_ORDER}
+        return {n: float(statistics.median(a[n] for a in attributes)) for n in ATTRIBUTES}
 
     def fingerprint(self) -> str:
         """Hash of the data settings and the sample list: a resumed run must see the same."""

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import torch
 import torch.distributed as dist
 
-from ..errors import InputError
+from ..devices import resolve_device
 
 
 @dataclass(frozen=True)
@@ -33,27 +33,23 @@ class Distributed:
         return self.rank == 0
 
 
-def _resolve_device(name: str, local_rank: int, distributed: bool) -> torch.device:
-    if name == "auto":
-        name = "cuda" if torch.cuda.is_available() else "cpu"
-    if name.startswith("cuda"):
-        if not torch.cuda.is_available():
-            raise InputError("CUDA is not available on this machine", field="train.device")
-        if distributed or name == "cuda":
-            index = local_rank if distributed else torch.cuda.current_device()
-            name = f"cuda:{index}"
-        torch.cuda.set_device(torch.device(name))
-    return torch.device(name)
+def _select_cuda(device: torch.device) -> torch.device:
+    """Make a CUDA device this process's current one (``cuda`` → ``cuda:<current index>``)."""
+    if device.type == "cuda":
+        if device.index is None:
+            device = torch.device(f"cuda:{torch.cuda.current_device()}")
+        torch.cuda.set_device(device)
+    return device
 
 
 def setup(device_name: str) -> tuple[Distributed, torch.device]:
     """Join the torchrun process group when launched by torchrun; the device of this process."""
     world_size = int(os.environ.get("WORLD_SIZE", "1"))
     if world_size <= 1:
-        return Distributed(), _resolve_device(device_name, 0, False)
+        return Distributed(), _select_cuda(resolve_device(device_name, field="train.device"))
     rank = int(os.environ["RANK"])
     local_rank = int(os.environ.get("LOCAL_RANK", rank))
-    device = _resolve_device(device_name, local_rank, True)
+    device = _select_cuda(resolve_device(device_name, local_rank, field="train.device"))
     if not dist.is_initialized():
         backend = "nccl" if device.type == "cuda" else "gloo"
         dist.init_process_group(backend=backend, rank=rank, world_size=world_size)

@@ -26,7 +26,7 @@ import torch
 
 from ..assets.gaussians import Gaussians
 from ..errors import InputError
-from ..geometry import quaternion_to_matrix as quaternions_to_rotations
+from ..geometry import quaternion_to_matrix
 from ..render import Cameras, intrinsics_from_fov
 from .session import ViewerSession
 
@@ -61,7 +61,7 @@ def splat_arrays(gaussians: Gaussians) -> dict[str, np.ndarray]:
     """The Gaussians as viser's splat renderer takes them: centers [N, 3], covariances
     [N, 3, 3] (R diag(s²) Rᵀ, metres²), rgbs [N, 3] in [0, 1], opacities [N, 1]."""
     with torch.no_grad():
-        rotation = quaternions_to_rotations(gaussians.quats.float())
+        rotation = quaternion_to_matrix(gaussians.quats.float())
         scales = gaussians.scales.float()
         covariance = rotation @ torch.diag_embed(scales * scales) @ rotation.transpose(-1, -2)
         return {
@@ -81,7 +81,7 @@ def camera_from_viser(
 ) -> Cameras:
     """A browser's camera as a one-camera :class:`~reconphys.render.Cameras` (DESIGN §3)."""
     width = max(8, 2 * round(height * aspect / 2))
-    rotation = quaternions_to_rotations(torch.tensor(wxyz, dtype=torch.float64))
+    rotation = quaternion_to_matrix(torch.tensor(wxyz, dtype=torch.float64))
     centre = torch.tensor(position, dtype=torch.float64)
     world_to_cam = torch.eye(4, dtype=torch.float64)
     world_to_cam[:3, :3] = rotation.T
@@ -418,7 +418,7 @@ class ViewerApp:
         ).start()
 
     def _save_recording(self, recording, folder: Path, camera, height: int) -> None:
-        from .recording import write_recording
+        from ..interact.recording import write_recording
 
         frames = recording.anchors.shape[0]
 

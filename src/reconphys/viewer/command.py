@@ -76,8 +76,8 @@ def view_command(
             session.reset()
         return
     if script is not None:
-        from .recording import write_recording
-        from .script import load_script, run_script
+        from ..interact.recording import write_recording
+        from ..interact.script import load_script, run_script
 
         if out is None:
             raise InputError("--script needs --out (the folder for the results)", field="--out")

@@ -1,4 +1,5 @@
-"""Scripted, headless interaction: a JSON list of actions driving a :class:`ViewerSession`.
+"""Scripted, headless interaction: a JSON list of actions driving an
+:class:`~reconphys.interact.interaction.Interaction` (or the viewer's session, which is one).
 
 The same controller API as the browser UI, without a browser (tests, batch renders). A script is a
 JSON list; each entry is an object with one action::
@@ -32,7 +33,8 @@ from pathlib import Path
 import torch
 
 from ..errors import InputError
-from .session import Recording, ViewerSession
+from .interaction import Interaction
+from .recording import Recording
 
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0)}
 AXES["-z"] = (2, -1.0)
@@ -63,7 +65,7 @@ def _vector(value, where: str) -> torch.Tensor:
     return vector
 
 
-def _extreme_point(session: ViewerSession, axis: str, where: str) -> torch.Tensor:
+def _extreme_point(session: Interaction, axis: str, where: str) -> torch.Tensor:
     if axis not in AXES:
         raise InputError(f"expected one of {list(AXES)}, got {axis!r}", field=where)
     dim, sign = AXES[axis]
@@ -71,7 +73,7 @@ def _extreme_point(session: ViewerSession, axis: str, where: str) -> torch.Tenso
     return means[int(torch.argmax(sign * means[:, dim]))]
 
 
-def run_script(session: ViewerSession, steps: list[dict], record: bool = True) -> Recording | None:
+def run_script(session: Interaction, steps: list[dict], record: bool = True) -> Recording | None:
     """Apply ``steps`` in order (simulating in the calling thread); with ``record`` returns the
     recording of every frame from the start of the script."""
     if record:
@@ -92,7 +94,7 @@ def run_script(session: ViewerSession, steps: list[dict], record: bool = True) -
     return session.stop_recording() if record else None
 
 
-def _apply(session: ViewerSession, action: str, value, where: str) -> None:
+def _apply(session: Interaction, action: str, value, where: str) -> None:
     if action == "run":
         if not isinstance(value, int) or value < 0:
             raise InputError(f"expected a frame count ≥ 0, got {value!r}", field=where)
@@ -120,7 +122,7 @@ def _apply(session: ViewerSession, action: str, value, where: str) -> None:
         session.release(str(value))
 
 
-def _grab(session: ViewerSession, value, where: str) -> None:
+def _grab(session: Interaction, value, where: str) -> None:
     if not isinstance(value, dict) or ("at" in value) == ("point" in value):
         raise InputError('expected {"name": ..., "at": "+x"} or {"point": [x, y, z]}', field=where)
     if "at" in value:
@@ -131,7 +133,7 @@ def _grab(session: ViewerSession, value, where: str) -> None:
     session.grab(point, count=int(count) if count else None, name=value.get("name"))
 
 
-def _move(session: ViewerSession, value, where: str) -> None:
+def _move(session: Interaction, value, where: str) -> None:
     if not isinstance(value, dict) or "grip" not in value or ("by" in value) == ("to" in value):
         raise InputError('expected {"grip": NAME, "by" or "to": [x, y, z]}', field=where)
     name = str(value["grip"])

@@ -1,14 +1,15 @@
-"""Compiled CPU substeps (Numba): the forward-only fast twin of ``integrator.step`` on CPU.
+"""The Numba engine: compiled CPU substeps, the forward-only fast twin of ``reference.step``.
 
 The viewer, the demo and ``simulate`` run long forward rollouts on CPUs, where the plain PyTorch
 step spends most of its time in per-op dispatch and temporaries (~15 tensors of [B, E, 3] per
 substep). Here a whole frame of substeps runs inside one compiled function: springs are split
 into one chunk per thread, each thread accumulates its forces into its own buffer (no atomics),
-then anchors are integrated in parallel. Same equations as :func:`integrator.step` (same clamps
-and ground contact); results differ from it by float round-off (summation order).
+then anchors are integrated in parallel. Same equations as
+:func:`reconphys.physics.reference.step` (same clamps and ground contact); results differ from it by
+float round-off (summation order).
 
 No autograd: ``rollout`` uses this path only when no gradient is needed (``method="auto"`` on CPU
-with gradients off, or ``method="numba"``). ``tests/test_physics_cpu_kernels.py`` compares it with
+with gradients off, or ``method="numba"``). ``tests/test_physics_numba_backend.py`` compares it with
 the PyTorch reference; ``benchmarks/bench_simulator.py`` measures both in one run.
 """
 
@@ -18,17 +19,14 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from .._optional import numba_available
+from .engine import Engine
 from .model import SpringMassModel
-from .state import State
 
-try:  # Numba is optional: the PyTorch path is used wherever it is missing.
+if numba_available():  # Numba is optional: the PyTorch path is used wherever it is missing.
     import numba
-except ImportError:  # pragma: no cover - depends on the machine
+else:  # pragma: no cover - depends on the machine
     numba = None
-
-
-def numba_available() -> bool:
-    return numba is not None
 
 
 def _frame_py(x, v, springs, rest, k, d, mass, friction, external, params, substeps, buffers):
@@ -138,18 +136,18 @@ def _array(t: Tensor, shape: tuple[int, ...], dtype) -> np.ndarray:
     return np.ascontiguousarray(np.broadcast_to(t.detach().cpu().numpy().astype(dtype), shape))
 
 
-class CompiledRollout:
-    """Frame-by-frame forward rollout with :func:`_frame` (CPU, float32 or float64, no grad)."""
+class NumbaEngine(Engine):
+    """Substeps with :func:`_frame_py` compiled by Numba (CPU, float32 or float64, no gradient).
 
-    def __init__(self, model: SpringMassModel, state: State, substeps: int, frame_dt: float):
+    Computes in the model's dtype; :meth:`run` does all its substeps in one compiled call.
+    """
+
+    def __init__(self, model: SpringMassModel, dt: float, batch: int, num_anchors: int):
         if numba is None:
             raise RuntimeError("the compiled CPU simulator needs Numba (pip install numba)")
-        batch, num_anchors = state.x.shape[:2]
         num_springs = model.num_springs
         dtype = np.float64 if model.dtype == torch.float64 else np.float32
-        self.dtype, self.torch_dtype = dtype, model.dtype
-        self.x = state.x.detach().cpu().numpy().astype(dtype, copy=True)
-        self.v = state.v.detach().cpu().numpy().astype(dtype, copy=True)
+        self.dtype, self.dt = dtype, dt
         springs = model.springs if model.springs.dim() == 3 else model.springs[None]
         self.springs = _array(springs, (batch, num_springs, 2), np.int64)
         rest = model.rest_length if model.rest_length.dim() == 2 else model.rest_length[None]
@@ -158,28 +156,29 @@ class CompiledRollout:
         self.d = _array(model.damping, (batch, num_springs), dtype)
         self.mass = _array(model.mass, (batch, num_anchors), dtype)
         self.friction = _array(model.friction, (batch, num_anchors), dtype)
-        h = frame_dt / substeps
         gravity = model.gravity
         self.params = np.array(
-            [model.spring_exponent, model.restitution, *gravity, model.ground_height, h],
+            [model.spring_exponent, model.restitution, *gravity, model.ground_height, dt],
             dtype=dtype,
         )
-        self.substeps, self.frame_dt = substeps, frame_dt
         parallel = batch * num_springs >= PARALLEL_MIN_SPRINGS
         chunks = PARALLEL_CHUNKS if parallel else 1
         self.kernel = _frame_parallel if parallel else _frame_serial
         self.buffers = np.zeros((batch, chunks, num_anchors, 3), dtype=dtype)
-        self.no_force = np.zeros_like(self.x)
+        self.no_force = np.zeros((batch, num_anchors, 3), dtype=dtype)
 
-    def frame(self, force: Tensor | None = None) -> State:
-        """Advance one frame (``force`` [B, N_A, 3] N, external, held constant over the frame);
-        returns the new state as CPU tensors."""
-        if force is None:
-            external = self.no_force
-        else:
-            external = _array(force, self.x.shape, self.dtype)
+    def step(self, x: Tensor, v: Tensor, force: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        return self.run(x, v, 1, force)
+
+    def run(
+        self, x: Tensor, v: Tensor, substeps: int, force: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """``substeps`` substeps in one compiled call; returns new CPU tensors (model dtype)."""
+        x = x.detach().cpu().numpy().astype(self.dtype, copy=True)
+        v = v.detach().cpu().numpy().astype(self.dtype, copy=True)
+        external = self.no_force if force is None else _array(force, x.shape, self.dtype)
         self.kernel(
-            self.x, self.v, self.springs, self.rest, self.k, self.d, self.mass, self.friction,
-            external, self.params, self.substeps, self.buffers,
+            x, v, self.springs, self.rest, self.k, self.d, self.mass, self.friction,
+            external, self.params, substeps, self.buffers,
         )  # fmt: skip
-        return State(torch.from_numpy(self.x.copy()), torch.from_numpy(self.v.copy()))
+        return torch.from_numpy(x), torch.from_numpy(v)

@@ -1,4 +1,5 @@
-"""Grips: controller points that hold the object by springs, like a gripper or a hand.
+"""Controllers: grips that hold the object by springs, like a gripper or a hand, and the frame
+stepper that applies them (:func:`simulate_frame`, used by the viewer and scripted interaction).
 
 A grip is made where the user picks a point on the object. It attaches to the ``G`` anchors nearest
 to that point; each attached anchor gets its own controller point, ``target + offset``, where the
@@ -9,7 +10,8 @@ spring and a dashpot on the relative velocity:
     F_a = k_g · (target + offset_a − x_a) + d_g · (v_target − v_a)
 
 ``F_a`` enters the simulator as an external force (:class:`reconphys.physics.Control`), so the
-object is simulated by the same :func:`reconphys.physics.step` as everywhere else.
+object is simulated by the same :func:`reconphys.physics.step` as everywhere else, through
+:func:`reconphys.physics.rollout` with a per-substep ``control_fn``.
 
 Grip stiffness: the grip should hold like a firm gripper, as stiff as the explicit integrator
 allows. :func:`grip_coefficients` sizes it per anchor from the substep ``h``: ``h² k_g / m`` is
@@ -21,10 +23,17 @@ make a stiffer grip: the grip springs are a numerical stand-in for a rigid hold,
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor
+
+from .._optional import numba_available
+from .model import SpringMassModel
+from .rollout import rollout
+from .state import Control, State
 
 # Fractions of the explicit-Euler stability budget spent on a grip spring (see module docstring):
 # h²ω_g² = 0.15 and 2hc_g = 4ζ·hω_g ≈ 0.46, in all ≈ 0.6 of the 1.2 left by stable_substeps.
@@ -137,3 +146,55 @@ def grip_force(
     pull = plan.stiffness[:, None] * (controller - held_x)
     pull = pull + plan.damping[:, None] * (plan.velocity - held_v)
     return torch.zeros_like(x).index_add_(1, plan.anchors, pull)
+
+
+@contextmanager
+def numba_threads(count: int | None) -> Iterator[None]:
+    """Run the compiled CPU substeps with ``count`` threads in the calling thread (Numba's
+    setting is thread-local); ``None`` leaves Numba's setting alone."""
+    if count is None or not numba_available():
+        yield
+        return
+    import numba
+
+    previous = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(count), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(previous)
+
+
+def simulate_frame(
+    model: SpringMassModel,
+    state: State,  # x, v [B, N_A, 3]
+    frame_dt: float,  # seconds
+    substeps: int,
+    grips: list[Grip],
+    targets: list[Tensor],  # one [3] per grip: controller position at the end of the frame
+    threads: int | None = None,  # Numba threads of the compiled CPU substeps (None: Numba's)
+) -> State:
+    """One frame of ``substeps`` substeps; the grips' controllers move linearly from their
+    positions to ``targets`` during the frame.
+
+    The substeps are those of :func:`reconphys.physics.rollout` with its automatic choice of
+    method (on CPU the compiled substeps of :mod:`reconphys.physics.numba_backend`, else the
+    PyTorch :func:`~reconphys.physics.step`). A grip's force depends on the state, so it is
+    recomputed before every substep (held for one substep, as ``step`` holds a ``Control``)
+    through rollout's ``control_fn``.
+    """
+    h = frame_dt / substeps
+    with torch.inference_mode(), numba_threads(None if state.x.is_cuda else threads):
+        if not grips:
+            trajectory = rollout(model, state, 1, frame_dt, substeps=substeps)
+        else:
+            plan = plan_frame(grips, targets, model.mass, h, frame_dt)
+
+            def grips_control(current: State, substep: int) -> Control:
+                progress = (substep + 1) / substeps
+                return Control(force=grip_force(plan, current.x, current.v, progress))
+
+            trajectory = rollout(
+                model, state, 1, frame_dt, substeps=substeps, control_fn=grips_control
+            )
+    return State(trajectory.x[:, -1], trajectory.v[:, -1])

@@ -1,5 +1,6 @@
-"""Saving a recorded interaction: ``trajectory.npz`` (the format ``simulate`` writes),
-``interaction.json`` (grip positions and substeps per frame) and ``interaction.mp4``.
+"""A recorded interaction (:class:`Recording`) and how it is saved: ``trajectory.npz`` (the format
+``simulate`` writes), ``interaction.json`` (grip positions and substeps per frame) and
+``interaction.mp4``.
 
 Frames are rendered after the recording stops, with the project's renderer (DESIGN §3: the object
 alone on black), so recording costs the live simulation nothing but a copy of each frame's state.
@@ -9,19 +10,33 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
+from torch import Tensor
 
 from ..assets.asset import Asset
+from ..assets.trajectory import write_trajectory
 from ..physics import Trajectory
 from ..render import Cameras
+from ..render.cameras import dataset_view
+from ..render.sequence import render_sequence
 from ..render.video import to_uint8, write_mp4
-from ..simulate import default_view, render_frames, write_trajectory
-from .session import Recording
 
 RENDER_CHUNK = 16  # frames rendered at a time (bounds the float image memory)
+
+
+@dataclass
+class Recording:
+    """Anchor states of a recorded interaction, one row per published frame (CPU, float32)."""
+
+    anchors: Tensor  # [T+1, N_A, 3] metres; row 0 is the state when recording started
+    velocities: Tensor  # [T+1, N_A, 3] m/s
+    grip_positions: list[dict[str, list[float]]]  # per row: grip name → controller position, m
+    substeps: list[int]  # per row: substeps of the frame that produced it (row 0: 0)
+    frame_dt: float  # seconds between rows
 
 
 def recording_trajectory(recording: Recording) -> Trajectory:
@@ -68,12 +83,13 @@ def write_recording(
     paths = {"trajectory": write_trajectory(folder / "trajectory.npz", trajectory)}
     paths["interaction"] = write_interaction(folder / "interaction.json", recording)
     if render_video:
-        camera = camera or default_view(resolution, resolution, 0)
+        camera = camera or dataset_view(resolution, resolution, 0)
         device = torch.device(device)
         chunks = []
         for start in range(0, anchors.shape[0], RENDER_CHUNK):
             chunk = anchors[start : start + RENDER_CHUNK].to(device)
-            chunks.append(to_uint8(render_frames(asset, chunk, camera, backend)))
+            means = asset.gaussian_means(chunk)
+            chunks.append(to_uint8(render_sequence(asset.gaussians, means, camera, backend)))
             if progress is not None:
                 progress(min(start + RENDER_CHUNK, anchors.shape[0]), anchors.shape[0])
         frames = np.concatenate(chunks)

@@ -1,4 +1,5 @@
-"""``reconphys simulate --script / --push``: the viewer's controller driving an offline run."""
+"""``reconphys simulate --script / --push``: scripted interaction (interact/script.py) driving an
+offline run through the viewer's controller."""
 
 from __future__ import annotations
 
@@ -150,7 +151,7 @@ def test_bad_push_is_a_one_line_error(asset_dir, tmp_path, args, message):
 
 
 def test_push_in_a_negative_direction_grabs_the_other_side():
-    from reconphys.viewer.script import push_script
+    from reconphys.interact.script import push_script
 
     steps = push_script(7, (0.0, -0.05, 0.02))
     assert steps[0] == {"run": 2}

@@ -1,4 +1,4 @@
-"""The fused Triton engine (physics/fused.py) against the PyTorch engine.
+"""The Triton engine (physics/triton_backend.py) against the PyTorch engine.
 
 Without a GPU the kernels run in Triton's CPU interpreter (a subprocess with TRITON_INTERPRET=1);
 with CUDA and Triton they are compiled. Either way they must give the reference's trajectories
@@ -18,7 +18,7 @@ import pytest
 import torch
 
 from reconphys.physics import knn_springs
-from reconphys.physics.fused import adjacency_table
+from reconphys.physics.triton_backend import adjacency_table
 
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
 
@@ -57,7 +57,7 @@ def test_fused_matches_torch_engine():
     env = dict(os.environ)
     if device == "cpu":
         env["TRITON_INTERPRET"] = "1"
-    script = Path(__file__).with_name("fused_compare.py")
+    script = Path(__file__).with_name("triton_compare.py")
     completed = subprocess.run(
         [sys.executable, str(script), "--device", device],
         env=env,

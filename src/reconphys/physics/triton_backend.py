@@ -1,4 +1,5 @@
-"""Fused Triton kernels for the substep and its exact VJP: the fast twin of the PyTorch path.
+"""The Triton engine: fused kernels for the substep and its exact VJP, the fast twin of the
+PyTorch engine (:mod:`reconphys.physics.torch_backend`) on CUDA.
 
 Layout: anchors are processed in blocks, one program per (block of anchors, scene). Each anchor
 walks its incident springs through a padded adjacency table (ELL format, ``[B_t, N_A, D]``, D the
@@ -10,10 +11,10 @@ gradients are accumulated per element (per anchor for mass and friction, per spr
 damping and rest length; a spring's gradient is written by its lower-index end only) and summed to
 the attributes' shapes once per rollout.
 
-The equations are exactly those of :func:`reconphys.physics.integrator.step` and
-:func:`reconphys.physics.adjoint.substep_vjp` (same clamps and ties), with ``(1 + |ε|)^p``
+The equations are exactly those of :func:`reconphys.physics.reference.step` and
+:func:`reconphys.physics.torch_backend.substep_vjp` (same clamps and ties), with ``(1 + |ε|)^p``
 evaluated as ``exp(p·log(1 + |ε|))``; results differ from the PyTorch path by float round-off
-(summation order). ``tests/test_physics_fused.py`` compares the two through Triton's CPU
+(summation order). ``tests/test_physics_triton_backend.py`` compares the two through Triton's CPU
 interpreter (``TRITON_INTERPRET=1``); ``benchmarks/check_fused_vs_reference.py`` does it on a GPU.
 """
 
@@ -24,6 +25,7 @@ import os
 import torch
 from torch import Tensor
 
+from .engine import Engine
 from .model import SpringMassModel
 
 try:  # Triton is optional: the PyTorch path is used wherever it is missing.
@@ -33,10 +35,6 @@ except ImportError:  # pragma: no cover - depends on the machine
     triton = None
 
 BLOCK_ANCHORS = 128  # anchors per program
-
-
-def triton_available() -> bool:
-    return triton is not None
 
 
 def fused_usable(device: torch.device) -> bool:
@@ -184,7 +182,7 @@ if triton is not None:
         p, e, g0, g1, g2, ground, h,
         BLOCK: tl.constexpr,
     ):  # fmt: skip
-        """One substep for a block of anchors of one scene (see integrator.step)."""
+        """One substep for a block of anchors of one scene (see reference.step)."""
         b = tl.program_id(1)
         n = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
         mask = n < num_anchors
@@ -360,8 +358,9 @@ def _strided(value: Tensor, batch: int, size: int) -> tuple[Tensor, int, int]:
     return value, batch_stride, element_stride
 
 
-class FusedEngine:
-    """Substep and substep-VJP with the Triton kernels (same interface as ``TorchEngine``).
+class TritonEngine(Engine):
+    """Substep and substep-VJP with the Triton kernels (the interface of
+    :class:`~reconphys.physics.engine.BackwardEngine`, like ``TorchEngine``; no external force).
 
     Built once per rollout: the adjacency table and the attribute strides are prepared here.
     """
@@ -405,7 +404,9 @@ class FusedEngine:
         rest, k, d = self.rest, self.k, self.d
         return (self.other, self.spring, self.ell_sb, self.degree, *rest, *k, *d)
 
-    def step(self, x: Tensor, v: Tensor) -> tuple[Tensor, Tensor]:
+    def step(self, x: Tensor, v: Tensor, force: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        if force is not None:
+            raise ValueError("the Triton engine takes no external force; use the PyTorch engine")
         x, v = x.contiguous(), v.contiguous()
         x_out, v_out = torch.empty_like(x), torch.empty_like(v)
         _substep_kernel[self.grid](

@@ -8,6 +8,7 @@ import pytest
 import torch
 from helpers import box_grid
 
+from reconphys._optional import numba_available
 from reconphys.physics import (
     SpringMassModel,
     State,
@@ -18,7 +19,6 @@ from reconphys.physics import (
     spring_energy,
     stable_substeps,
 )
-from reconphys.physics.cpu_kernels import numba_available
 
 G = 9.8
 

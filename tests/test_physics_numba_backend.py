@@ -1,4 +1,4 @@
-"""Compiled CPU substeps (physics/cpu_kernels.py) against the plain PyTorch reference."""
+"""The Numba engine (physics/numba_backend.py) against the plain PyTorch reference."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import pytest
 import torch
 from test_physics_adjoint import small_system
 
+from reconphys._optional import numba_available
 from reconphys.physics import SpringMassModel, State, rollout
-from reconphys.physics.cpu_kernels import numba_available
 from reconphys.physics.state import Control
 
 pytestmark = pytest.mark.skipif(not numba_available(), reason="needs Numba")
@@ -60,9 +60,9 @@ def test_numba_refuses_gradients():
 def test_parallel_result_does_not_depend_on_the_thread_count(monkeypatch):
     import numba
 
-    from reconphys.physics import cpu_kernels
+    from reconphys.physics import numba_backend
 
-    monkeypatch.setattr(cpu_kernels, "PARALLEL_MIN_SPRINGS", 0)  # force the parallel build
+    monkeypatch.setattr(numba_backend, "PARALLEL_MIN_SPRINGS", 0)  # force the parallel build
     springs, rest, x0, v0, attributes = small_system()
     model = SpringMassModel(springs, rest, **attributes, dtype=torch.float64)
     results = []

@@ -1,7 +1,8 @@
-"""Run the fused Triton engine and the PyTorch engine on the same small rollouts; print JSON.
+"""Run the Triton engine and the PyTorch engine on the same small rollouts; print JSON.
 
-Used by tests/test_physics_fused.py in a subprocess with TRITON_INTERPRET=1 (Triton reads it at
-import), and usable by hand on a GPU machine: ``python tests/fused_compare.py --device cuda``.
+Used by tests/test_physics_triton_backend.py in a subprocess with TRITON_INTERPRET=1 (Triton reads
+it at import), and usable by hand on a GPU machine:
+``python tests/triton_compare.py --device cuda``.
 """
 
 from __future__ import annotations
