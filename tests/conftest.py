@@ -1,4 +1,5 @@
-"""Shared fixtures: small deterministic anchor sets for physics tests."""
+"""Shared fixtures (small deterministic anchor sets for physics tests) and the ``cuda`` marker:
+a test marked ``@pytest.mark.cuda`` is skipped where no CUDA device is available."""
 
 from __future__ import annotations
 
@@ -22,3 +23,12 @@ def ball_anchors():
 def _flush_denormals():
     # Settling objects drive velocities into float32 denormals, which are ~100x slower on CPU.
     torch.set_flush_denormal(True)
+
+
+def pytest_collection_modifyitems(config, items):
+    if torch.cuda.is_available():
+        return
+    skip = pytest.mark.skip(reason="needs CUDA")
+    for item in items:
+        if "cuda" in item.keywords:
+            item.add_marker(skip)

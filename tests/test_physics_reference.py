@@ -194,7 +194,7 @@ def test_per_anchor_and_per_spring_attributes_match_scalars(ball_anchors):
     assert (c.x - a.x).abs().max() > 1e-4
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+@pytest.mark.cuda
 def test_cuda_matches_cpu(ball_anchors):
     anchors, springs, rest = ball_anchors
     x0 = anchors + torch.tensor([0.0, 0.0, 0.21], dtype=anchors.dtype)
