@@ -110,7 +110,7 @@ def test_script_renders_the_video_and_preview(asset_dir, tmp_path):
 @pytest.mark.parametrize(
     "content, message",
     [
-        (None, "cannot read"),
+        (None, "file not found"),
         ("{not json", "not valid JSON"),
         ('{"run": 3}', "expected a JSON list"),
         ('[{"run": 2}, {"jump": 1}]', "script[1]"),

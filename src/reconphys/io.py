@@ -142,10 +142,11 @@ def read_json(
     format: str | None = None,
     version: int | None = None,
     expected: str = "a JSON object",
-) -> dict:
-    """The JSON object in ``path``; InputError naming the file when it is missing, unreadable,
-    not JSON, not an object (``expected`` says what it should be), or (when given) has another
-    ``format`` field or ``version``."""
+    kind: type = dict,
+) -> dict | list:
+    """The JSON value in ``path`` (an object, or a list with ``kind=list``); InputError naming the
+    file when it is missing, unreadable, not JSON, not a ``kind`` (``expected`` says what it
+    should be), or (when given) has another ``format`` field or ``version``."""
     path = Path(path)
     source = str(path)
     if not path.is_file():
@@ -158,7 +159,7 @@ def read_json(
         raise InputError(f"cannot read ({e.strerror or e})", source=source) from None
     if format is not None and (not isinstance(data, dict) or data.get("format") != format):
         raise InputError(f"expected format {format!r}", source=source, field="format")
-    if not isinstance(data, dict):
+    if not isinstance(data, kind):
         raise InputError(f"expected {expected}", source=source)
     if version is not None and data.get("version") != version:
         raise InputError(f"version {data.get('version')!r} is not supported", source, "version")

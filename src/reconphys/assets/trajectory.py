@@ -9,12 +9,12 @@ Arrays: ``anchors`` [T+1, N_A, 3] float32 metres (frame 0 = initial state), ``ve
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from torch import Tensor
 
+from ..io import atomic_file
 from ..physics import Trajectory
 
 
@@ -34,13 +34,6 @@ def write_trajectory(
     }
     if gaussian_means is not None:
         arrays["gaussian_means"] = gaussian_means.detach().cpu().float().numpy()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".trajectory.", suffix=".npz", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_file(path) as tmp:
         np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return path

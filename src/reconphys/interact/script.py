@@ -24,15 +24,14 @@ JSON list; each entry is an object with one action::
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Sequence
-from pathlib import Path
 
 import torch
 
 from ..errors import InputError
+from ..io import read_json
 from .interaction import Interaction
 from .recording import Recording
 
@@ -44,15 +43,7 @@ PUSH_MOVE_FRAMES = 10  # frames over which `simulate --push` moves its grip
 
 def load_script(path: str | os.PathLike) -> list[dict]:
     """Read and check the shape of a script file (a JSON list of one-key objects)."""
-    try:
-        steps = json.loads(Path(path).read_text())
-    except OSError as e:
-        raise InputError(f"cannot read ({e.strerror or e})", source=str(path)) from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"not valid JSON ({e})", source=str(path)) from None
-    if not isinstance(steps, list):
-        raise InputError("expected a JSON list of actions", source=str(path))
-    return steps
+    return read_json(path, expected="a JSON list of actions", kind=list)
 
 
 def _vector(value, where: str) -> torch.Tensor:
