@@ -25,11 +25,9 @@ from torch import Tensor
 
 from ..assets.asset import Asset
 from ..errors import InputError
-from ..physics import State, deform_means, stable_substeps
+from ..physics import ATTRIBUTES, State, deform_means, stable_substeps
 from ..physics.control import Grip, nearest_anchors, pick_point, simulate_frame
 from .recording import Recording
-
-ATTRIBUTES = ("mass", "stiffness", "damping", "friction")
 
 
 @dataclass

@@ -19,7 +19,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from .model import SpringMassModel
+from .model import ATTRIBUTES, SpringMassModel
 from .state import State
 from .torch_backend import TorchEngine
 
@@ -30,7 +30,8 @@ def sum_to_shape(grad: Tensor, shape: torch.Size) -> Tensor:
     return grad.sum(dims, keepdim=True) if dims else grad
 
 
-ATTRIBUTES = ("mass", "stiffness", "damping", "friction", "rest_length")
+# The model tensors the backward differentiates: the four attributes and the springs' rest lengths.
+DIFFERENTIABLE = (*ATTRIBUTES, "rest_length")
 
 
 class AdjointRollout(torch.autograd.Function):
@@ -42,7 +43,7 @@ class AdjointRollout(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, make_engine, template, frames, substeps, dt, progress, x0, v0, *attributes):
-        model = template.with_attributes(**dict(zip(ATTRIBUTES, attributes, strict=True)))
+        model = template.with_attributes(**dict(zip(DIFFERENTIABLE, attributes, strict=True)))
         engine = make_engine(model, dt, *x0.shape[:2])
         x, v = x0, v0
         xs, vs = [x0], [v0]
@@ -80,7 +81,7 @@ class AdjointRollout(torch.autograd.Function):
             grad_v = grad_v + grad_vs[:, frame]
         totals = engine.attribute_grads()
         grad_attributes = []
-        for name in ATTRIBUTES:
+        for name in DIFFERENTIABLE:
             value = getattr(model, name)
             grad = totals[name]
             if value.dim() == 1:  # rest_length [E] shared by the batch
@@ -107,9 +108,9 @@ def rollout_adjoint(
     batch = max(state.x.shape[0], state.v.shape[0], model.batch_size)
     x0 = state.x.expand(batch, -1, -1).contiguous()
     v0 = state.v.expand(batch, -1, -1).contiguous()
-    attributes = [getattr(model, name) for name in ATTRIBUTES]
+    attributes = [getattr(model, name) for name in DIFFERENTIABLE]
     dt = frame_dt / substeps
-    detached = {name: t.detach() for name, t in zip(ATTRIBUTES, attributes, strict=True)}
+    detached = {name: t.detach() for name, t in zip(DIFFERENTIABLE, attributes, strict=True)}
     template = model.with_attributes(**detached)
     return AdjointRollout.apply(
         make_engine, template, num_frames, substeps, dt, progress, x0, v0, *attributes
