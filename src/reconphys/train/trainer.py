@@ -18,6 +18,11 @@ A run whose OUT holds a checkpoint continues from it (same config required, see
 :data:`~reconphys.train.config.RESUME_FREE_KEYS`) and reproduces the uninterrupted run's losses:
 the batches of step s depend only on (seed, s), and model, optimiser, schedule and random states
 come back exactly. Geometry: the samples' ground-truth assets (labelled in the model metadata).
+
+Why one module of ~500 lines: the :class:`Trainer` is the loop's state (model, optimiser,
+schedule, scaler, data order, logs) and its methods are the loop's stages in order (build,
+resume, step, report, save), read top to bottom like nanoGPT's ``train.py``; the parts that stand
+alone already live beside it (config, data, objective, checkpoint, distributed).
 """
 
 from __future__ import annotations

@@ -11,6 +11,10 @@ does waits for a simulation frame.
 
 viser is an optional dependency (``pip install 'reconphys[viewer]'``); it is imported only when
 a :class:`ViewerApp` is made.
+
+Why one module of ~500 lines: it is one object, the web page, whose GUI callbacks, scene handles
+and display thread share the page's state; the simulation it shows lives below it
+(:mod:`reconphys.interact`, :mod:`reconphys.physics.control`), so nothing here is physics.
 """
 
 from __future__ import annotations
@@ -185,6 +189,9 @@ class ViewerApp:
     # GUI
 
     def _build_gui(self) -> None:
+        """The side panel, top to bottom: status, play/step/reset, drop height, the four
+        attributes and substeps, grips, recording, help; each control's callback only changes the
+        session's inputs (the simulation thread does the work)."""
         gui = self.server.gui
         session = self.session
         gui.configure_theme(control_width="medium", dark_mode=False, show_share_button=False)
