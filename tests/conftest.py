@@ -3,9 +3,11 @@ a test marked ``@pytest.mark.cuda`` is skipped where no CUDA device is available
 
 from __future__ import annotations
 
+import socket
+
 import pytest
 import torch
-from helpers import ball_points
+from helpers import ball_points, make_small_asset
 
 from reconphys.physics import knn_springs, sample_volume_anchors
 
@@ -17,6 +19,23 @@ def ball_anchors():
     springs, _ = knn_springs(anchors, 16)
     rest = (anchors[springs[:, 1]] - anchors[springs[:, 0]]).norm(dim=1)
     return anchors, springs, rest
+
+
+@pytest.fixture(scope="session")
+def small_asset_dir(tmp_path_factory):
+    """One small sphere asset folder (tests/helpers.py SMALL_ASSET) shared by the command-line
+    tests; read-only: a test that changes an asset makes its own."""
+    return make_small_asset(tmp_path_factory.mktemp("small") / "asset")
+
+
+@pytest.fixture
+def no_network(monkeypatch):
+    """Any attempt to open a network connection fails the test."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a test touched the network")
+
+    monkeypatch.setattr(socket.socket, "connect", refuse)
 
 
 @pytest.fixture(autouse=True, scope="session")

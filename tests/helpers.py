@@ -21,6 +21,25 @@ def box_grid(nx: int, ny: int, nz: int, spacing: float) -> torch.Tensor:
     return grid - torch.tensor([(nx - 1) * spacing / 2, (ny - 1) * spacing / 2, 0.0])
 
 
+# A small procedural asset for the command-line tests: 400 Gaussians, 48 anchors, K = 8, ≥ 10
+# substeps per frame (dropped from 0.3 m, it lands before frame 10).
+SMALL_ASSET = ["--num-gaussians", "400", "--num-anchors", "48", "--neighbors", "8"]
+SMALL_ASSET += ["--min-substeps", "10"]
+
+
+def make_small_asset(out, *options):
+    """``reconphys make-asset OUT --shape sphere`` with :data:`SMALL_ASSET` (``options`` after it
+    win); returns ``out``."""
+    from typer.testing import CliRunner
+
+    from reconphys.cli import app
+
+    args = ["make-asset", str(out), "--shape", "sphere", *SMALL_ASSET, *options]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    return out
+
+
 def make_tiny_dataset(folder, **overrides):
     """A generated dataset in ``folder`` (32 px, 300 Gaussians, 64 anchors, K = 12; no training
     split unless overridden), made with torch on one thread; returns ``folder``."""

@@ -8,6 +8,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 import torch
+from helpers import make_small_asset
 from typer.testing import CliRunner
 
 from reconphys.assets.asset import read_asset, write_asset
@@ -21,17 +22,14 @@ from reconphys.cli import app
 from reconphys.physics import spring_forces
 
 runner = CliRunner()
-SMALL = ["--num-gaussians", "400", "--num-anchors", "64", "--neighbors", "8"]
-SMALL += ["--min-substeps", "10", "--stiffness", "250", "--damping", "0.8", "--friction", "0.4"]
-SMALL += ["--linear-velocity", "0.5", "0", "0", "--angular-velocity", "0", "0", "3"]
+# 64 anchors, set attributes and a spinning, sliding start (tests/helpers.py for the rest).
+OPTIONS = ["--num-anchors", "64", "--stiffness", "250", "--damping", "0.8", "--friction", "0.4"]
+OPTIONS += ["--linear-velocity", "0.5", "0", "0", "--angular-velocity", "0", "0", "3"]
 
 
 @pytest.fixture(scope="module")
 def asset_dir(tmp_path_factory):
-    out = tmp_path_factory.mktemp("export") / "asset"
-    result = runner.invoke(app, ["make-asset", str(out), "--shape", "sphere", *SMALL])
-    assert result.exit_code == 0, result.output
-    return out
+    return make_small_asset(tmp_path_factory.mktemp("export") / "asset", *OPTIONS)
 
 
 @pytest.fixture(scope="module")

@@ -12,17 +12,12 @@ from typer.testing import CliRunner
 from reconphys.cli import app
 
 runner = CliRunner()
-SMALL = ["--num-gaussians", "400", "--num-anchors", "48", "--neighbors", "8"]
-SMALL += ["--min-substeps", "10"]  # dropped from 0.3 m: it lands before frame 10
 QUIET = ["--no-render", "--device", "cpu"]
 
 
 @pytest.fixture(scope="module")
-def asset_dir(tmp_path_factory):
-    out = tmp_path_factory.mktemp("controllers") / "asset"
-    result = runner.invoke(app, ["make-asset", str(out), "--shape", "sphere", *SMALL])
-    assert result.exit_code == 0, result.output
-    return out
+def asset_dir(small_asset_dir):
+    return small_asset_dir
 
 
 def simulate(asset_dir, out, *args) -> np.ndarray:
