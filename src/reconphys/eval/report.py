@@ -191,9 +191,20 @@ def _row_label(name: str, entry: dict) -> str:
 
 
 def report_markdown(results: Results, document: dict, command: str | None) -> str:
-    methods = document["methods"]
-    settings = document["settings"]
+    """report.md: the settings, Table 1 (per method, both windows), Table 2 (per sample),
+    Table 3 (attribute errors) and the figures, from the metrics.json ``document``."""
     frames = windows(results.num_frames)
+    lines = _settings_lines(results, document, command, frames)
+    lines += _table_methods(document, frames)
+    lines += _table_samples(results, document, frames)
+    lines += _table_attributes(document)
+    lines += _figure_lines()
+    return "\n".join(lines)
+
+
+def _settings_lines(results: Results, document: dict, command: str | None, frames) -> list[str]:
+    """The title and the run's settings, one bullet each."""
+    settings = document["settings"]
     (r0, r1), (f0, f1) = frames["reconstruction"], frames["future"]
     lines = [
         "# Evaluation report",
@@ -214,7 +225,15 @@ def report_markdown(results: Results, document: dict, command: str | None) -> st
         lines.insert(2, f"- command: `{command}`")
     if settings["lpips"]["note"]:
         lines.append(f"- {settings['lpips']['note']}")
-    lines += [
+    return lines
+
+
+def _table_methods(document: dict, frames) -> list[str]:
+    """Table 1: every method's means over both windows, with the notes on each method."""
+    methods = document["methods"]
+    settings = document["settings"]
+    (r0, r1), (f0, f1) = frames["reconstruction"], frames["future"]
+    lines = [
         "",
         "**†: uses the ground-truth geometry and initial state** (true Gaussians, anchors, "
         "springs, binding and initial velocity): an upper bound for any method that must "
@@ -257,7 +276,13 @@ def report_markdown(results: Results, document: dict, command: str | None) -> st
                 f"- {name} beats its initial guess ({name}{INITIAL_SUFFIX}) on future PSNR on "
                 f"{won[0]} of {won[1]} samples."
             )
-    lines += ["", "## Table 2 — per sample", ""]
+    return lines
+
+
+def _table_samples(results: Results, document: dict, frames) -> list[str]:
+    """Table 2: every metric per sample and method, one block per window."""
+    methods = document["methods"]
+    lines = ["", "## Table 2 — per sample", ""]
     samples = results.samples
     for window in ("reconstruction", "future"):
         start, stop = frames[window]
@@ -284,7 +309,13 @@ def report_markdown(results: Results, document: dict, command: str | None) -> st
                     f"| {metric.upper()} | {_row_label(name, entry)} | " + " | ".join(values) + " |"
                 )
         lines.append("")
-    lines += [
+    return lines
+
+
+def _table_attributes(document: dict) -> list[str]:
+    """Table 3: attribute MAE of the methods that predict physics."""
+    methods = document["methods"]
+    lines = [
         "## Table 3 — attribute errors (MAE over samples)",
         "",
         "Mass, stiffness and damping are not observable from video one by one (DESIGN §4: "
@@ -304,7 +335,12 @@ def report_markdown(results: Results, document: dict, command: str | None) -> st
             + " | ".join(_cell(mae[k], "{:.4g}") for k in keys)
             + " |"
         )
-    lines += [
+    return lines
+
+
+def _figure_lines() -> list[str]:
+    """The figures and the other files of the folder."""
+    return [
         "",
         "## Figures",
         "",
@@ -317,7 +353,6 @@ def report_markdown(results: Results, document: dict, command: str | None) -> st
         "Files: metrics.json, summary.csv, per_sample.csv, per_frame.csv.",
         "",
     ]
-    return "\n".join(lines)
 
 
 # ----------------------------------------------------------------------------------------------
