@@ -22,6 +22,7 @@ import os
 import shutil
 import tempfile
 import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -60,6 +61,40 @@ class PhysicsSettings:
     binding_neighbors: int = 16  # n_b
     binding_power: float = 2.0  # p_b
     object_id: str = ""  # seeds the anchor sampling
+
+    @classmethod
+    def from_data_settings(
+        cls,
+        data,  # a dataset's settings: DataSettings, its dict (model.json) or similar
+        attributes: Mapping[str, float] | None = None,  # mass, stiffness, damping, friction
+        object_id: str = "",
+        **overrides,  # fields set explicitly (frame_dt, ground_height, num_anchors); None: skip
+    ) -> PhysicsSettings:
+        """The settings of an asset built from new Gaussians: the attributes, and the spring-mass
+        settings of a dataset (anchors, springs, binding, contact, ``min_substeps`` → substeps,
+        frame_dt). A setting the data does not name keeps this class's default; values are
+        converted to the field's type."""
+        get = data.get if isinstance(data, Mapping) else lambda key: getattr(data, key, None)
+        values = {}
+        for name, key in _DATA_SETTINGS.items():
+            value = get(key)
+            if value is not None:
+                values[name] = type(getattr(cls, name))(value)
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(**(attributes or {}), **values, object_id=object_id)
+
+
+# PhysicsSettings field ← the name in a dataset's settings (DataSettings)
+_DATA_SETTINGS = {
+    "num_anchors": "num_anchors",
+    "num_neighbors": "num_neighbors",
+    "binding_neighbors": "binding_neighbors",
+    "binding_power": "binding_power",
+    "spring_exponent": "spring_exponent",
+    "restitution": "restitution",
+    "substeps": "min_substeps",
+    "frame_dt": "frame_dt",
+}
 
 
 @dataclass
