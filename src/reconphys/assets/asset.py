@@ -19,8 +19,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import tempfile
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -31,6 +29,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
+from ..io import atomic_folder
 from ..physics import SpringMassModel, State, Trajectory, deform_means, rollout
 from .gaussians import Gaussians
 from .ply import read_ply, write_ply
@@ -216,11 +215,7 @@ def write_asset(asset: Asset, folder: str | os.PathLike, overwrite: bool = False
     """Write ``asset`` to ``folder`` atomically; refuses an existing folder unless ``overwrite``."""
     folder = Path(folder)
     validate_asset(asset, str(folder))
-    if folder.exists() and not overwrite:
-        raise InputError("already exists (use --overwrite to replace it)", source=str(folder))
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
+    with atomic_folder(folder, overwrite) as staging:
         write_ply(staging / "gaussians.ply", asset.gaussians)
         anchors = {
             "x0": asset.x0.detach().cpu().float().numpy(),
@@ -242,12 +237,6 @@ def write_asset(asset: Asset, folder: str | os.PathLike, overwrite: bool = False
         with open(staging / "physics.json", "w") as f:
             json.dump(physics, f, indent=2)
             f.write("\n")
-        if folder.exists():
-            shutil.rmtree(folder)
-        os.replace(staging, folder)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return folder
 
 

@@ -309,19 +309,14 @@ def write_outputs(
     """Write the asset folder (DESIGN §6) plus ``preview.mp4`` / ``preview.png`` (observed |
     simulated) and ``prediction.json`` (attributes, timings, details) atomically into ``out``."""
     import json
-    import shutil
-    import tempfile
 
     from ..assets.asset import write_asset
+    from ..io import atomic_folder, check_new_output
     from ..render.video import write_image, write_mp4
     from .preview import contact_sheet, side_by_side, simulate_and_render
 
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise InputError("already exists (use --overwrite to replace it)", source=str(out))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    out = check_new_output(out, overwrite)
+    with atomic_folder(out, overwrite=True) as staging:
         started = time.perf_counter()
         write_asset(result.asset, staging, overwrite=True)
         result.timings["write"] = time.perf_counter() - started
@@ -336,13 +331,4 @@ def write_outputs(
             result.timings["preview"] = time.perf_counter() - started
         summary = result.summary()
         (staging / "prediction.json").write_text(json.dumps(summary, indent=2) + "\n")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(staging, 0o777 & ~umask)  # mkdtemp makes it 0700
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(staging, out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return summary
