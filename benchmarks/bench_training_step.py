@@ -22,10 +22,10 @@ from common import machine_description
 from reconphys.data.storage import read_manifest
 from reconphys.physics import ATTRIBUTES
 from reconphys.render import Cameras, available_backends
+from reconphys.render.photometric import SceneBatch, photometric_loss
 from reconphys.threads import set_cpu_threads
 from reconphys.train.config import DataConfig
 from reconphys.train.data import TrainingSamples, collate
-from reconphys.train.objective import SceneBatch, photometric_loss
 
 
 def step_seconds(batch, backend: str, min_substeps: int, repeats: int) -> tuple[float, float]:

@@ -18,9 +18,9 @@ import torch
 
 from reconphys.data.dataset import DropDataset
 from reconphys.eval.metrics import observable_attributes
+from reconphys.models.model_input import predictor_frames
 from reconphys.models.shipped import load_predictor
 from reconphys.physics import ATTRIBUTES
-from reconphys.pipeline.model_input import predictor_frames
 from reconphys.threads import set_cpu_threads
 
 OBSERVABLES = ("log k/m", "log d/m", "f")

@@ -21,8 +21,8 @@ from reconphys.capture import default_camera, load_observation
 from reconphys.capture.placement import estimate_linear_velocity, fit_to_mask
 from reconphys.capture.video import resample_indices, resample_times
 from reconphys.cli import app
+from reconphys.models.model_input import predictor_frames
 from reconphys.models.physics_predictor import resize_frames
-from reconphys.pipeline.model_input import predictor_frames
 from reconphys.render import Cameras, render
 from reconphys.render.cameras import dataset_views, intrinsics_from_fov
 
@@ -252,9 +252,10 @@ def test_refine_lowers_the_photometric_loss(dataset, sample_id):
     from dataclasses import replace
 
     from reconphys.pipeline.refine import refine
+    from reconphys.pipeline.samples import load_sample
 
-    observation = load_observation(dataset, sample=sample_id)
-    truth = observation.sample["asset"]
+    observation, sample = load_sample(dataset, sample_id)
+    truth = sample.asset
     wrong = replace(truth, physics=replace(truth.physics, stiffness=truth.physics.stiffness / 8))
     refined, history = refine(wrong, observation, steps=3, resolution=32, num_frames=20)
     assert history["loss_best"] < history["loss_initial"]

@@ -19,9 +19,8 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import tempfile
 import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +29,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
+from ..io import atomic_folder
 from ..physics import SpringMassModel, State, Trajectory, deform_means, rollout
 from .gaussians import Gaussians
 from .ply import read_ply, write_ply
@@ -60,6 +60,40 @@ class PhysicsSettings:
     binding_neighbors: int = 16  # n_b
     binding_power: float = 2.0  # p_b
     object_id: str = ""  # seeds the anchor sampling
+
+    @classmethod
+    def from_data_settings(
+        cls,
+        data,  # a dataset's settings: DataSettings, its dict (model.json) or similar
+        attributes: Mapping[str, float] | None = None,  # mass, stiffness, damping, friction
+        object_id: str = "",
+        **overrides,  # fields set explicitly (frame_dt, ground_height, num_anchors); None: skip
+    ) -> PhysicsSettings:
+        """The settings of an asset built from new Gaussians: the attributes, and the spring-mass
+        settings of a dataset (anchors, springs, binding, contact, ``min_substeps`` → substeps,
+        frame_dt). A setting the data does not name keeps this class's default; values are
+        converted to the field's type."""
+        get = data.get if isinstance(data, Mapping) else lambda key: getattr(data, key, None)
+        values = {}
+        for name, key in _DATA_SETTINGS.items():
+            value = get(key)
+            if value is not None:
+                values[name] = type(getattr(cls, name))(value)
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(**(attributes or {}), **values, object_id=object_id)
+
+
+# PhysicsSettings field ← the name in a dataset's settings (DataSettings)
+_DATA_SETTINGS = {
+    "num_anchors": "num_anchors",
+    "num_neighbors": "num_neighbors",
+    "binding_neighbors": "binding_neighbors",
+    "binding_power": "binding_power",
+    "spring_exponent": "spring_exponent",
+    "restitution": "restitution",
+    "substeps": "min_substeps",
+    "frame_dt": "frame_dt",
+}
 
 
 @dataclass
@@ -181,11 +215,7 @@ def write_asset(asset: Asset, folder: str | os.PathLike, overwrite: bool = False
     """Write ``asset`` to ``folder`` atomically; refuses an existing folder unless ``overwrite``."""
     folder = Path(folder)
     validate_asset(asset, str(folder))
-    if folder.exists() and not overwrite:
-        raise InputError("already exists (use --overwrite to replace it)", source=str(folder))
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
+    with atomic_folder(folder, overwrite) as staging:
         write_ply(staging / "gaussians.ply", asset.gaussians)
         anchors = {
             "x0": asset.x0.detach().cpu().float().numpy(),
@@ -207,12 +237,6 @@ def write_asset(asset: Asset, folder: str | os.PathLike, overwrite: bool = False
         with open(staging / "physics.json", "w") as f:
             json.dump(physics, f, indent=2)
             f.write("\n")
-        if folder.exists():
-            shutil.rmtree(folder)
-        os.replace(staging, folder)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return folder
 
 

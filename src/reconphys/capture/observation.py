@@ -3,9 +3,10 @@
 INPUT is one of:
 
 - a video file (mp4/mov/avi/mkv/webm/gif): decoded, its frame rate from the file (or ``fps``);
-- a folder of frame images (png/jpg/...): frame rate ``fps`` (default ``1 / frame_dt``);
-- a dataset folder written by ``make-data`` with ``sample=ID``: the stored frames of one view,
-  its camera, and the sample's ground-truth geometry and initial state (an upper bound).
+- a folder of frame images (png/jpg/...): frame rate ``fps`` (default ``1 / frame_dt``).
+
+A dataset sample (its stored frames, camera and truth) is read by
+:func:`reconphys.pipeline.samples.load_sample`; :func:`stored_observation` wraps its frames.
 
 Frames are resampled in time to ``frame_dt`` (nearest recorded frame), masked (background set
 to black, as in the synthetic renders the models were trained on) and kept at their size.
@@ -14,7 +15,7 @@ to black, as in the synthetic renders the models were trained on) and kept at th
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,6 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from ..physics import ATTRIBUTES
 from .camera import CameraSpec, default_camera, read_camera
 from .masks import (
     alpha_masks,
@@ -52,7 +52,6 @@ class Observation:
     mask_source: str  # where the masks came from
     recorded_fps: float | None = None  # the file's frame rate (None: not stored / not a video)
     recorded_frames: int = 0  # frames before resampling
-    sample: dict = field(default_factory=dict)  # dataset input only: root, id, view, asset, truth
 
     @property
     def num_frames(self) -> int:
@@ -69,7 +68,6 @@ def stored_observation(
     world_to_cam: Tensor,  # [4, 4]
     frame_dt: float,
     source: str,
-    sample: dict | None = None,
 ) -> Observation:
     """An observation of frames already in memory (a dataset view: black backdrop, ground z = 0)."""
     height, width = frames.shape[1:3]
@@ -82,37 +80,6 @@ def stored_observation(
         source=source,
         mask_source="background subtraction (black backdrop)",
         recorded_frames=frames.shape[0],
-        sample=sample or {},
-    )
-
-
-def _dataset_observation(root: Path, sample: str, view: int) -> Observation:
-    from ..data.dataset import DropDataset
-    from ..data.storage import read_manifest
-
-    read_manifest(root)  # a clear error for a folder that is not a dataset
-    dataset = DropDataset(root, views=[view], allow_incomplete=True, verify=False)
-    index = dataset.index_of(sample)
-    item = dataset[index]
-    return stored_observation(
-        item["frames"][0].float(),
-        item["K"][0],
-        item["world_to_cam"][0],
-        dataset.settings.frame_dt,
-        f"{root} sample {sample} view {view} (stored frames)",
-        {
-            "root": str(root),
-            "id": sample,
-            "view": view,
-            "asset": dataset.asset(index),
-            "attributes": dict(
-                zip(
-                    ATTRIBUTES,
-                    item["attributes"].tolist(),
-                    strict=True,
-                )
-            ),
-        },
     )
 
 
@@ -124,21 +91,13 @@ def load_observation(
     camera: str | os.PathLike | None = None,  # camera JSON (see .camera)
     fps: float | None = None,  # frame rate of a frame folder / override of the file's
     frame_dt: float = 0.03,
-    sample: str | None = None,  # dataset input: the sample id
-    view: int = 0,  # dataset input: the view
 ) -> Observation:
     """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input."""
     path = Path(input)
     if not path.exists():
         raise InputError("not found", source=str(path))
     if path.is_dir() and (path / "manifest.json").is_file():
-        if sample is None:
-            raise InputError("a dataset folder: give the sample with --sample ID", source=str(path))
-        if not 0 <= view < 4:
-            raise InputError(f"expected 0–3, got {view}", field="--view")
-        return _dataset_observation(path, sample, view)
-    if sample is not None:
-        raise InputError("--sample is for dataset folders (with manifest.json)", source=str(path))
+        raise InputError("a dataset folder: give the sample with --sample ID", source=str(path))
     times = None
     if path.is_dir():
         raw, recorded_fps = read_frame_folder(path), None

@@ -16,9 +16,10 @@ import torch
 from torch import Tensor
 
 from ..assets.asset import Asset, PhysicsSettings
-from ..assets.build import build_asset, rigid_velocity
+from ..assets.build import build_from_gaussians
 from ..assets.gaussians import Gaussians
 from ..assets.normalize import rotate_gaussians
+from ..geometry import rigid_velocity
 from .sampling import SampleSpec, centroid_height_for_contact
 from .settings import DataSettings
 
@@ -36,21 +37,6 @@ class CanonicalObject:
     binding_weight: Tensor  # [N, n_b] float32
 
 
-def physics_settings(settings: DataSettings, object_id: str, **attributes) -> PhysicsSettings:
-    return PhysicsSettings(
-        spring_exponent=settings.spring_exponent,
-        restitution=settings.restitution,
-        frame_dt=settings.frame_dt,
-        substeps=settings.min_substeps,
-        num_anchors=settings.num_anchors,
-        num_neighbors=settings.num_neighbors,
-        binding_neighbors=settings.binding_neighbors,
-        binding_power=settings.binding_power,
-        object_id=object_id,
-        **attributes,
-    )
-
-
 def build_object(
     object_id: str,
     key: str,
@@ -59,7 +45,7 @@ def build_object(
     description: dict,
 ) -> CanonicalObject:
     """Anchors (seeded by ``object_id``), springs and binding for ``gaussians``."""
-    asset = build_asset(gaussians, physics_settings(settings, object_id))
+    asset = build_from_gaussians(gaussians, {}, settings, object_id)
     return CanonicalObject(
         id=object_id,
         key=key,
@@ -111,7 +97,7 @@ def sample_asset(
     rotation = torch.from_numpy(placement.rotation).float()
     gaussians = rotate_gaussians(obj.gaussians, rotation)
     gaussians = gaussians.with_means(placement.apply(obj.gaussians.means))
-    physics = physics_settings(settings, obj.id, **spec.attributes)
+    physics = PhysicsSettings.from_data_settings(settings, spec.attributes, obj.id)
     return Asset(
         gaussians=gaussians,
         x0=x0,

@@ -24,18 +24,15 @@ from pathlib import Path
 
 import torch
 
-from ..assets.asset import Asset, PhysicsSettings
-from ..capture import Observation, load_observation
-from ..capture.placement import (
-    estimate_ground_height,
-    estimate_linear_velocity,
-    fit_to_mask,
-    silhouette_iou,
-)
+from ..assets.asset import Asset
+from ..assets.build import lifted_above
+from ..capture import Observation
+from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
+from ..models.model_input import predictor_frames
+from ..models.reconstruct import initial_velocity, observed_asset, predicted_gaussians
 from ..physics import ATTRIBUTES
-from .model_input import predictor_frames
-from .settings import DEFAULT_NUM_ANCHORS
+from .samples import SampleTruth, load_input
 
 PLACEMENTS = ("auto", "as-is", "fit")
 GROUNDS = ("camera", "landed")
@@ -84,109 +81,13 @@ def _given_gaussians(ply: Path, observation: Observation, placement: str):
     if how == "fit":
         gaussians = fit_to_mask(gaussians, first_mask, observation.camera)
     after = silhouette_iou(gaussians, first_mask, observation.camera) if how == "fit" else iou
-    lowest = float(gaussians.means[:, 2].min())
-    ground = observation.camera.ground_height
-    if lowest < ground:  # the fit put it into the ground: lift it onto the ground
-        shift = torch.tensor([0.0, 0.0, ground - lowest + 1e-3])
-        gaussians = gaussians.with_means(gaussians.means + shift)
+    # the fit may put it into the ground: lift it onto the ground
+    gaussians = lifted_above(gaussians, observation.camera.ground_height)
     return gaussians, {
         "placement": how,
         "silhouette_iou_given": round(iou, 3),
         "silhouette_iou_placed": round(after, 3),
     }
-
-
-def lifted_above(gaussians, ground_height: float):
-    """The Gaussians moved up just above ``ground_height`` (metres) where their lowest centre is
-    below it: an object must start above its ground."""
-    lowest = float(gaussians.means[:, 2].min())
-    if lowest >= ground_height:
-        return gaussians
-    return gaussians.with_means(
-        gaussians.means + torch.tensor([0.0, 0.0, ground_height - lowest + 1e-3])
-    )
-
-
-def physics_settings(
-    attributes: dict[str, float],
-    data: dict,  # a dataset's settings (anchors, springs, binding, contact), as in model.json
-    frame_dt: float,
-    ground_height: float,
-    object_id: str,
-    num_anchors: int | None = None,
-) -> PhysicsSettings:
-    """The settings of an asset built from new Gaussians: the attributes, and the spring-mass
-    settings of the data the physics network was trained on."""
-    return PhysicsSettings(
-        **attributes,
-        num_anchors=num_anchors or int(data.get("num_anchors", DEFAULT_NUM_ANCHORS)),
-        num_neighbors=int(data.get("num_neighbors", 32)),
-        binding_neighbors=int(data.get("binding_neighbors", 16)),
-        binding_power=float(data.get("binding_power", 2.0)),
-        spring_exponent=float(data.get("spring_exponent", 0.5)),
-        restitution=float(data.get("restitution", 0.0)),
-        substeps=int(data.get("min_substeps", 100)),
-        frame_dt=frame_dt,
-        ground_height=ground_height,
-        object_id=object_id,
-    )
-
-
-def feed_forward_asset(
-    observation: Observation, attributes: dict[str, float], data: dict, gs_model=None
-) -> Asset:
-    """What the feed-forward pipeline builds without a PLY: the 3DGS predictor's Gaussians from
-    frame 0, the initial linear velocity from the masks, anchors/springs/binding by the settings
-    ``data`` (see :func:`physics_settings`), on the camera's ground. Used to train the physics
-    network on predicted geometry (``data.geometry = "predicted"``)."""
-    from ..assets.build import build_asset
-
-    placed, _ = predicted_gaussians(observation, gs_model)
-    velocity = estimate_linear_velocity(
-        placed.means, observation.masks, observation.camera, observation.frame_dt
-    )
-    ground_height = observation.camera.ground_height
-    physics = physics_settings(
-        attributes,
-        data,
-        observation.frame_dt,
-        ground_height,
-        f"predicted-{Path(observation.source).stem}",
-    )
-    placed = lifted_above(placed, ground_height)
-    return build_asset(placed, physics, linear_velocity=velocity.tolist())
-
-
-def predicted_gaussians(observation: Observation, gs_model=None):
-    """Frame 0 → the 3DGS predictor's Gaussians on the object's pixels (world frame), and the
-    model's path. ``gs_model``: a path, a loaded predictor, or None (the default one). The frame
-    and its mask are resampled to the dataset's intrinsics at the model's size (as the physics
-    network's input), so the camera's pose places them."""
-    from ..models.gaussian_predictor import prune_gaussians
-    from ..models.gaussian_shipped import LoadedGaussianPredictor, load_gaussian_predictor
-    from .model_input import virtual_intrinsics
-
-    if isinstance(gs_model, LoadedGaussianPredictor):
-        loaded = gs_model
-    else:
-        loaded = load_gaussian_predictor(gs_model)
-    size = loaded.model.config.resolution
-    frame = predictor_frames(observation.frames[:1], observation.camera.K, size)[0, 0]
-    mask = (
-        predictor_frames(
-            observation.masks[:1, ..., None].expand(-1, -1, -1, 3), observation.camera.K, size
-        )[0, 0, ..., 0]
-        > 0.5
-    )
-    K = virtual_intrinsics(size).float()
-    w2c = observation.camera.world_to_cam.float()
-    with torch.no_grad():
-        g = loaded.model(frame[None], mask[None].float(), K[None], w2c[None])
-    try:
-        pruned = prune_gaussians(g.map(lambda t: t[0]), mask.reshape(-1).float())
-    except ValueError as e:
-        raise InputError(str(e), source=observation.source) from None
-    return pruned.map(lambda t: t.detach().float()), loaded.path
 
 
 def predict(
@@ -238,7 +139,7 @@ def predict(
     details["model"] = str(predictor.path)
 
     started = time.perf_counter()
-    observation = load_observation(
+    observation, truth = load_input(
         input,
         masks=masks,
         background=background,
@@ -281,6 +182,7 @@ def predict(
         refine_steps=refine_steps,
         refine_resolution=refine_resolution,
         progress=progress,
+        truth=truth,
     )
 
 
@@ -299,15 +201,16 @@ def predict_observation(
     refine_steps: int = 0,
     refine_resolution: int = 64,
     progress: bool = False,
+    truth: SampleTruth | None = None,
 ) -> PredictResult:
     """The steps after decoding (see :func:`predict`), for an observation already in memory
-    (e.g. a dataset sample in ``evaluate``)."""
-    from ..assets.build import build_asset
-
+    (e.g. a dataset sample in ``evaluate``). ``truth``: a dataset sample's (see
+    :func:`.samples.load_sample`): its geometry and initial state are used unless ``gaussians``
+    is given or ``geometry="predicted"`` (an upper bound), and its attributes are reported."""
     timings = {} if timings is None else timings
     details = {} if details is None else details
     started = time.perf_counter()
-    dataset_asset = observation.sample.get("asset")
+    dataset_asset = None if truth is None else truth.asset
     build_new = True  # a new asset from given or predicted Gaussians (not the dataset's own)
     if gaussians is not None:
         placed, placement_info = _given_gaussians(Path(gaussians), observation, placement)
@@ -323,9 +226,7 @@ def predict_observation(
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
         object_id = f"predicted-{Path(observation.source).stem}"
     if build_new:
-        velocity = estimate_linear_velocity(
-            placed.means, observation.masks, observation.camera, observation.frame_dt
-        )
+        velocity = initial_velocity(placed, observation)
         details["initial_velocity"] = {
             "linear_m_s": [round(float(x), 4) for x in velocity],
             "angular_rad_s": [0.0, 0.0, 0.0],
@@ -346,8 +247,6 @@ def predict_observation(
         if not build_new:
             raise InputError("a dataset sample's ground is known (z = 0)", field="--ground")
         ground_height = landed
-    if build_new:
-        placed = lifted_above(placed, ground_height)
     details["ground_height_m"] = round(ground_height, 4)
     timings["gaussians"] = time.perf_counter() - started
 
@@ -364,15 +263,16 @@ def predict_observation(
 
     started = time.perf_counter()
     if build_new:
-        physics = physics_settings(
+        asset = observed_asset(
+            placed,
+            observation,
             attributes,
             _model_data_settings(predictor),
-            observation.frame_dt,
-            ground_height,
             object_id,
+            ground_height,
             num_anchors,
+            velocity,
         )
-        asset = build_asset(placed, physics, linear_velocity=velocity.tolist())
     else:
         asset = replace(dataset_asset, physics=replace(dataset_asset.physics, **attributes))
     timings["asset_build"] = time.perf_counter() - started
@@ -394,8 +294,8 @@ def predict_observation(
         )
         timings["refine"] = time.perf_counter() - started
         details["refine"] = history
-    if observation.sample:
-        details["truth"] = observation.sample["attributes"]
+    if truth is not None:
+        details["truth"] = truth.attributes
     return PredictResult(asset, observation, attributes, timings, details)
 
 
@@ -409,19 +309,14 @@ def write_outputs(
     """Write the asset folder (DESIGN §6) plus ``preview.mp4`` / ``preview.png`` (observed |
     simulated) and ``prediction.json`` (attributes, timings, details) atomically into ``out``."""
     import json
-    import shutil
-    import tempfile
 
     from ..assets.asset import write_asset
+    from ..io import atomic_folder, check_new_output
     from ..render.video import write_image, write_mp4
     from .preview import contact_sheet, side_by_side, simulate_and_render
 
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise InputError("already exists (use --overwrite to replace it)", source=str(out))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    out = check_new_output(out, overwrite)
+    with atomic_folder(out, overwrite=True) as staging:
         started = time.perf_counter()
         write_asset(result.asset, staging, overwrite=True)
         result.timings["write"] = time.perf_counter() - started
@@ -436,13 +331,4 @@ def write_outputs(
             result.timings["preview"] = time.perf_counter() - started
         summary = result.summary()
         (staging / "prediction.json").write_text(json.dumps(summary, indent=2) + "\n")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(staging, 0o777 & ~umask)  # mkdtemp makes it 0700
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(staging, out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return summary

@@ -1,6 +1,6 @@
 """Test-time refinement: gradient steps on the photometric loss from the feed-forward attributes.
 
-The loss is the training objective's (:func:`reconphys.train.objective.photometric_loss`): the
+The loss is the training objective's (:func:`reconphys.render.photometric.photometric_loss`): the
 asset is simulated from its initial state with self-forcing, rendered into the recording's camera
 and compared with the masked frames 1..T−1 by mean squared error. The mass stays as predicted (a
 video fixes only k/m and d/m, DESIGN §4); log k, log d and the friction (through a logit) are
@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from ..assets.asset import Asset
 from ..capture import Observation
 from ..physics.model import ATTRIBUTE_RANGES
-from ..train.objective import SceneBatch, photometric_loss
+from ..render.photometric import SceneBatch, photometric_loss
 
 REFINE_LR = 0.05  # Adam step in log k, log d and logit f
 MIN_SUBSTEPS = 25  # as the cpu_small training recipe (configs/cpu_small.toml)

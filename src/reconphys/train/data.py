@@ -174,7 +174,7 @@ class TrainingSamples(Dataset):
         objective replaces them)."""
         if index not in self._predicted_assets:
             from ..capture.observation import stored_observation
-            from ..pipeline.predict import feed_forward_asset
+            from ..models.reconstruct import feed_forward_asset
 
             observation = stored_observation(
                 item["frames"][0],

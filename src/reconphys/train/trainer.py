@@ -56,12 +56,13 @@ from ..models.shipped import (
 )
 from ..physics import ATTRIBUTES
 from ..render import Cameras
+from ..render.photometric import SceneBatch, photometric_loss
 from ..threads import set_cpu_threads
 from . import distributed
 from .checkpoint import CHECKPOINT, load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from .config import TrainConfig, differing_keys
 from .data import Batch, StepSampler, TrainingSamples, collate
-from .objective import SceneBatch, photometric_loss, supervised_loss
+from .objective import supervised_loss
 
 LOG = "log.jsonl"
 TENSORBOARD = "tensorboard"

@@ -31,8 +31,8 @@ from dataclasses import dataclass, field, replace
 import torch
 from torch import Tensor
 
-from ...assets.asset import Asset, PhysicsSettings
-from ...assets.build import build_asset
+from ...assets.asset import Asset
+from ...assets.build import build_from_gaussians
 from ...assets.gaussians import Gaussians
 from ...geometry import axis_angle_to_matrix, rigid_velocity
 from ...physics import ATTRIBUTE_RANGES, State, deform_means, rollout
@@ -134,17 +134,7 @@ class SpringGausMethod(Method):
         generator = torch.Generator().manual_seed(options.seed)
 
         prior = options.trivial.values
-        physics = PhysicsSettings(
-            **prior,
-            frame_dt=sample.frame_dt,
-            substeps=s.min_substeps,
-            num_anchors=s.num_anchors,
-            num_neighbors=s.num_neighbors,
-            binding_neighbors=s.binding_neighbors,
-            binding_power=s.binding_power,
-            object_id=sample.id,
-        )
-        asset = build_asset(gaussians, physics)
+        asset = build_from_gaussians(gaussians, prior, s, sample.id, frame_dt=sample.frame_dt)
         frames = sample.frames[:, :INPUT_FRAMES].to(device)  # frames 20+ are never seen
         cameras = sample.cameras.to(device)
         v0, velocity_info = self._fit_velocity(

@@ -15,10 +15,10 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from ..models.physics_predictor import resize_frames
 from ..render.cameras import intrinsics_from_fov
-from .settings import DATASET_FOV_DEG
+from .physics_predictor import resize_frames
 
+DATASET_FOV_DEG = 40.0  # the dataset cameras' vertical field of view (DESIGN §3)
 SUPERSAMPLE = 4  # the virtual image is sampled at 4× the network's size, then area-averaged
 
 

@@ -1,0 +1,107 @@
+"""Assets from predicted geometry (DESIGN §2, §6): the 3DGS predictor's Gaussians from frame 0,
+the initial linear velocity from the masks' free fall, and the asset built from them.
+
+Below both training (``data.geometry = "predicted"``, :mod:`reconphys.train.data`) and the user's
+path (:mod:`reconphys.pipeline.predict`), so that neither imports the other.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import torch
+from torch import Tensor
+
+from ..assets.asset import Asset
+from ..assets.build import build_from_gaussians
+from ..assets.gaussians import Gaussians
+from ..capture import Observation
+from ..capture.placement import estimate_linear_velocity
+from ..errors import InputError
+from .model_input import predictor_frames, virtual_intrinsics
+
+
+def initial_velocity(gaussians: Gaussians, observation: Observation) -> Tensor:  # [3] m/s
+    """The initial linear velocity of ``gaussians`` (world frame) from the masks' free fall."""
+    return estimate_linear_velocity(
+        gaussians.means, observation.masks, observation.camera, observation.frame_dt
+    )
+
+
+def observed_asset(
+    placed: Gaussians,  # world frame, on the first frame's object
+    observation: Observation,
+    attributes: Mapping[str, float],  # mass (kg/anchor), stiffness, damping, friction
+    data: Mapping,  # a dataset's settings (anchors, springs, binding, contact), as in model.json
+    object_id: str,  # seeds the anchors
+    ground_height: float,  # metres
+    num_anchors: int | None = None,  # None: the data's
+    velocity: Tensor | None = None,  # [3] m/s; None: initial_velocity(placed, observation)
+) -> Asset:
+    """New Gaussians of a recording → asset: the initial linear velocity, the settings of the
+    data the physics network was trained on (see
+    :meth:`~reconphys.assets.asset.PhysicsSettings.from_data_settings`), lifted above the ground,
+    anchors/springs/binding built."""
+    if velocity is None:
+        velocity = initial_velocity(placed, observation)
+    return build_from_gaussians(
+        placed,
+        attributes,
+        data,
+        object_id,
+        linear_velocity=velocity.tolist(),
+        lift=True,
+        frame_dt=observation.frame_dt,
+        ground_height=ground_height,
+        num_anchors=num_anchors or None,
+    )
+
+
+def feed_forward_asset(
+    observation: Observation, attributes: dict[str, float], data: dict, gs_model=None
+) -> Asset:
+    """What the feed-forward pipeline builds without a PLY: the 3DGS predictor's Gaussians from
+    frame 0, the initial linear velocity from the masks, anchors/springs/binding by the settings
+    ``data`` (see :func:`observed_asset`), on the camera's ground. Used to train the physics
+    network on predicted geometry (``data.geometry = "predicted"``)."""
+    placed, _ = predicted_gaussians(observation, gs_model)
+    return observed_asset(
+        placed,
+        observation,
+        attributes,
+        data,
+        f"predicted-{Path(observation.source).stem}",
+        observation.camera.ground_height,
+    )
+
+
+def predicted_gaussians(observation: Observation, gs_model=None):
+    """Frame 0 → the 3DGS predictor's Gaussians on the object's pixels (world frame), and the
+    model's path. ``gs_model``: a path, a loaded predictor, or None (the default one). The frame
+    and its mask are resampled to the dataset's intrinsics at the model's size (as the physics
+    network's input), so the camera's pose places them."""
+    from .gaussian_predictor import prune_gaussians
+    from .gaussian_shipped import LoadedGaussianPredictor, load_gaussian_predictor
+
+    if isinstance(gs_model, LoadedGaussianPredictor):
+        loaded = gs_model
+    else:
+        loaded = load_gaussian_predictor(gs_model)
+    size = loaded.model.config.resolution
+    frame = predictor_frames(observation.frames[:1], observation.camera.K, size)[0, 0]
+    mask = (
+        predictor_frames(
+            observation.masks[:1, ..., None].expand(-1, -1, -1, 3), observation.camera.K, size
+        )[0, 0, ..., 0]
+        > 0.5
+    )
+    K = virtual_intrinsics(size).float()
+    w2c = observation.camera.world_to_cam.float()
+    with torch.no_grad():
+        g = loaded.model(frame[None], mask[None].float(), K[None], w2c[None])
+    try:
+        pruned = prune_gaussians(g.map(lambda t: t[0]), mask.reshape(-1).float())
+    except ValueError as e:
+        raise InputError(str(e), source=observation.source) from None
+    return pruned.map(lambda t: t.detach().float()), loaded.path

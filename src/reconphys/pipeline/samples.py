@@ -1,0 +1,91 @@
+"""A dataset sample as ``predict``'s input: the stored frames of one view and its camera (an
+:class:`~reconphys.capture.Observation`), and, separately, the sample's truth (its placed asset:
+ground-truth geometry and initial state, an upper bound; and its attributes)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..assets.asset import Asset
+from ..capture import Observation, load_observation
+from ..capture.observation import stored_observation
+from ..errors import InputError
+from ..physics import ATTRIBUTES
+
+
+@dataclass
+class SampleTruth:
+    """What a dataset knows about one sample and a recording does not."""
+
+    root: str  # the dataset folder
+    id: str  # the sample id
+    view: int
+    asset: Asset  # the placed object with its true attributes and initial velocity
+    attributes: dict[str, float]  # the true attributes (ATTRIBUTES)
+
+
+def is_dataset(path: str | os.PathLike) -> bool:
+    """True for a dataset folder written by ``make-data`` (it has a manifest.json)."""
+    path = Path(path)
+    return path.is_dir() and (path / "manifest.json").is_file()
+
+
+def load_sample(
+    root: str | os.PathLike, sample: str | None, view: int = 0
+) -> tuple[Observation, SampleTruth]:
+    """The stored frames of ``sample``'s ``view`` (black backdrop, ground z = 0) and its truth."""
+    from ..data.dataset import DropDataset
+    from ..data.storage import read_manifest
+
+    root = Path(root)
+    if sample is None:
+        raise InputError("a dataset folder: give the sample with --sample ID", source=str(root))
+    if not 0 <= view < 4:
+        raise InputError(f"expected 0–3, got {view}", field="--view")
+    read_manifest(root)  # a clear error for a folder that is not a dataset
+    dataset = DropDataset(root, views=[view], allow_incomplete=True, verify=False)
+    index = dataset.index_of(sample)
+    item = dataset[index]
+    observation = stored_observation(
+        item["frames"][0].float(),
+        item["K"][0],
+        item["world_to_cam"][0],
+        dataset.settings.frame_dt,
+        f"{root} sample {sample} view {view} (stored frames)",
+    )
+    truth = SampleTruth(
+        root=str(root),
+        id=sample,
+        view=view,
+        asset=dataset.asset(index),
+        attributes=dict(zip(ATTRIBUTES, item["attributes"].tolist(), strict=True)),
+    )
+    return observation, truth
+
+
+def load_input(
+    input: str | os.PathLike,
+    *,
+    masks: str | os.PathLike | None = None,
+    background: str | os.PathLike | None = None,
+    camera: str | os.PathLike | None = None,
+    fps: float | None = None,
+    frame_dt: float = 0.03,
+    sample: str | None = None,  # dataset input: the sample id
+    view: int = 0,  # dataset input: the view
+) -> tuple[Observation, SampleTruth | None]:
+    """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
+    and the sample's truth for a dataset input (None otherwise). Raises InputError."""
+    path = Path(input)
+    if not path.exists():
+        raise InputError("not found", source=str(path))
+    if is_dataset(path):
+        return load_sample(path, sample, view)
+    if sample is not None:
+        raise InputError("--sample is for dataset folders (with manifest.json)", source=str(path))
+    observation = load_observation(
+        path, masks=masks, background=background, camera=camera, fps=fps, frame_dt=frame_dt
+    )
+    return observation, None
