@@ -35,12 +35,11 @@ bench: install
 	$(BIN)/python benchmarks/bench_renderer.py
 
 # The shipped physics predictor's recipe (docs/training.md "Results"; ~75 min on 2 CPU cores):
-# the cpu_small data, supervised pre-training on the observables, a mixed photometric fine-tune,
-# then the model is copied to the package's weights.
+# the cpu_small data (configs/data_small.toml), supervised pre-training on the observables, a
+# mixed photometric fine-tune, then the model is copied to the package's weights.
 CPU_SMALL := configs/cpu_small.toml objective.supervised_target=observables --no-progress
 model: install
-	$(BIN)/reconphys make-data --objects 40 --test-objects 6 --samples-per-object 6 \
-	    --test-samples-per-object 2 --resolution 32 --out data/cpu_small
+	$(BIN)/reconphys make-data --config configs/data_small.toml --out data/cpu_small
 	$(BIN)/reconphys train $(CPU_SMALL) objective.kind=supervised train.steps=2000 \
 	    train.batch_size=8 train.checkpoint_every=250 train.out=runs/cpu_small_sup_obs
 	$(BIN)/reconphys train $(CPU_SMALL) objective.kind=mixed train.init=runs/cpu_small_sup_obs \
@@ -50,10 +49,9 @@ model: install
 	cp runs/cpu_small_mixed/model.json src/reconphys/weights/physics_predictor.json
 
 # The shipped 3DGS predictor's recipe (docs/usage.md "The 3DGS predictor"): frame 0 of the
-# cpu_small data (made by `make model` above), 1500 steps × 4 samples.
+# cpu_small data (made by `make model` above), 1500 steps × 4 samples (configs/gs_cpu_small.toml).
 gs-model: install
-	$(BIN)/reconphys train-gs --data data/cpu_small --out runs/gs_cpu_small --steps 1500 \
-	    --batch-size 4 --threads 1 --no-progress
+	$(BIN)/reconphys train-gs --config configs/gs_cpu_small.toml --threads 1 --no-progress
 	cp runs/gs_cpu_small/model.safetensors src/reconphys/weights/gaussian_predictor.safetensors
 	cp runs/gs_cpu_small/model.json src/reconphys/weights/gaussian_predictor.json
 

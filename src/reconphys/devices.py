@@ -6,6 +6,7 @@ from __future__ import annotations
 import torch
 
 from .errors import InputError
+from .names import DEVICES
 
 
 def resolve_device(
@@ -19,8 +20,10 @@ def resolve_device(
     """
     if name == "auto":
         name = "cuda" if torch.cuda.is_available() else "cpu"
-    if name not in ("cpu", "cuda") and not name.startswith("cuda:"):
-        raise InputError(f"expected auto, cpu or cuda, got {name!r}", field=field)
+    if name not in DEVICES and not name.startswith("cuda:"):
+        raise InputError(
+            f"expected {', '.join(DEVICES[:-1])} or {DEVICES[-1]}, got {name!r}", field=field
+        )
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise InputError("CUDA was asked for but no CUDA device is available", field=field)
     if name.startswith("cuda") and local_rank is not None:

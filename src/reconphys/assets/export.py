@@ -29,9 +29,9 @@ import torch
 
 from ..errors import InputError
 from ..io import atomic_file
+from ..names import EXPORT_FORMATS
 from .asset import Asset
 
-FORMATS = ("newton", "mjcf")
 NEWTON_FORMAT = "reconphys.newton"
 NEWTON_VERSION = 1
 # Collision radius of the MuJoCo flex vertices (metres). Our anchors are points on the plane
@@ -233,7 +233,10 @@ EXPORTERS = {"newton": export_newton, "mjcf": export_mjcf}
 
 
 def export_asset(asset: Asset, path: str | os.PathLike, format: str) -> Path:
-    """Export ``asset`` to ``path`` in ``format`` (one of :data:`FORMATS`)."""
+    """Export ``asset`` to ``path`` in ``format`` (one of
+    :data:`~reconphys.names.EXPORT_FORMATS`)."""
     if format not in EXPORTERS:
-        raise InputError(f"expected one of {', '.join(FORMATS)}, got {format!r}", field="--format")
+        raise InputError(
+            f"expected one of {', '.join(EXPORT_FORMATS)}, got {format!r}", field="--format"
+        )
     return EXPORTERS[format](asset, path)

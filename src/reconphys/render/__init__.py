@@ -15,6 +15,7 @@ from torch import Tensor
 
 from reconphys._optional import gsplat_available, numba_available
 from reconphys.assets.gaussians import Gaussians
+from reconphys.names import RENDER_BACKENDS
 from reconphys.render.cameras import Cameras, dataset_views, intrinsics_from_fov, look_at
 from reconphys.render.gsplat_backend import rasterize_gsplat
 from reconphys.render.numba_backend import rasterize_numba
@@ -30,7 +31,6 @@ __all__ = [
     "render",
 ]
 
-BACKENDS = ("auto", "torch", "numba", "gsplat")
 RASTERIZERS = {"torch": rasterize_torch, "numba": rasterize_numba, "gsplat": rasterize_gsplat}
 
 
@@ -76,8 +76,8 @@ def render(
     element of a batch of Gaussians. ``near_plane`` is in metres, ``eps2d`` in pixels². gsplat
     computes in float32 whatever the input dtype; use backend="torch" for float64 (e.g. gradcheck).
     """
-    if backend not in BACKENDS:
-        raise ValueError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+    if backend not in RENDER_BACKENDS:
+        raise ValueError(f"backend: expected one of {RENDER_BACKENDS}, got {backend!r}")
     batch_shape = gaussians.means.shape[:-2]
     if cameras.batch_shape != batch_shape:
         if len(cameras.batch_shape) > 0:

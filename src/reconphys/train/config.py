@@ -11,32 +11,32 @@ Sections and what they hold (every key, its type and default is the dataclass fi
 A file gives any subset of keys; the rest keep their defaults. Overrides on the command line use
 dotted keys (``optim.lr=3e-4``, ``data.generate.objects=4``, ``model.encoder_channels=[16,32]``);
 values are TOML literals, or plain text for string keys. Every value is type-checked against the
-field it sets, and a bad key or value raises :class:`~reconphys.errors.InputError` naming it.
+field it sets, and a bad key or value raises :class:`~reconphys.errors.InputError` naming it (the
+reading, parsing and type checks are :mod:`reconphys.config_loader`'s, shared with ``make-data``
+and ``train-gs``; this module adds the sections, the ``data.generate``/``model.extra`` tables
+and the semantic checks).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
-import types
-import typing
 from dataclasses import dataclass, field, fields, replace
-from pathlib import Path
 
+from ..config_loader import (
+    check_type,
+    field_types,
+    flatten,
+    parse_override,
+    parse_value,
+    read_table,
+    resolve,
+)
 from ..data.settings import PRESETS, DataSettings
 from ..errors import InputError
 from ..models.encoders import encoder_names
 from ..models.physics_predictor import PredictorConfig
-
-try:  # Python ≥ 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10 without tomli
-    try:
-        import tomli as tomllib
-    except ModuleNotFoundError:
-        tomllib = None
 
 GENERATE = "generate"  # data.source value: generate the samples on the fly (no folder)
 OBJECTIVES = ("self_supervised", "supervised", "mixed")
@@ -126,7 +126,7 @@ class TrainConfig:
     @staticmethod
     def from_dict(data: dict, where: str = "config") -> TrainConfig:
         config = TrainConfig()
-        for key, value in _flatten(data, where):
+        for key, value in flatten(data, where, _is_dict_field):
             set_value(config, key, value, where)
         return config.validated()
 
@@ -144,54 +144,17 @@ def _jsonable(value):
 
 
 # ----------------------------------------------------------------------------------------------
-# reading and setting keys
+# reading and setting keys (the generic parts: reconphys.config_loader)
 
-
-def _flatten(data: dict, where: str, prefix: str = "") -> list[tuple[str, object]]:
-    """Nested sections → (dotted key, value); dict-valued fields are kept whole."""
-    if not isinstance(data, dict):
-        raise InputError("expected a table of sections", source=where, field=prefix or None)
-    items = []
-    for key, value in data.items():
-        dotted = f"{prefix}{key}"
-        if isinstance(value, dict) and not _is_dict_field(dotted):
-            items += _flatten(value, where, dotted + ".")
-        else:
-            items.append((dotted, value))
-    return items
+FREE_TABLES = (["data", "generate"], ["model", "extra"])  # dict fields set entry by entry
 
 
 def _is_dict_field(dotted: str) -> bool:
     try:
-        owner, name = _resolve(TrainConfig(), dotted.split("."), dotted, "config")
+        owner, name = resolve(TrainConfig(), dotted, "config", DERIVED_MODEL_KEYS)
     except InputError:
         return False
-    return _hints(type(owner)).get(name) is dict
-
-
-def _hints(cls) -> dict:
-    return typing.get_type_hints(cls)
-
-
-def _resolve(config: TrainConfig, parts: list[str], key: str, where: str | None):
-    """The dataclass that holds ``key`` and the field name in it."""
-    owner = config
-    for depth, part in enumerate(parts[:-1]):
-        names = {f.name for f in fields(owner)}
-        if part not in names or not dataclasses.is_dataclass(getattr(owner, part)):
-            prefix = ".".join(parts[: depth + 1])
-            raise InputError(f"unknown key ({_known(owner)})", source=where, field=prefix)
-        owner = getattr(owner, part)
-    if parts[-1] not in {f.name for f in fields(owner)}:
-        raise InputError(f"unknown key ({_known(owner)})", source=where, field=key)
-    return owner, parts[-1]
-
-
-def _known(owner) -> str:
-    names = [f.name for f in fields(owner) if f.name not in DERIVED_MODEL_KEYS]
-    if isinstance(owner, TrainConfig):
-        return "sections: " + ", ".join(names)
-    return "known: " + ", ".join(names)
+    return field_types(type(owner)).get(name) is dict
 
 
 def set_value(config: TrainConfig, key: str, value, where: str | None = "config") -> None:
@@ -206,7 +169,7 @@ def set_value(config: TrainConfig, key: str, value, where: str | None = "config"
         raise InputError("expected SECTION.KEY (e.g. optim.lr)", source=where, field=key)
     if parts[0] == "model" and len(parts) == 2 and parts[1] in DERIVED_MODEL_KEYS:
         raise InputError(f"set {DERIVED_MODEL_KEYS[parts[1]]} instead", source=where, field=key)
-    if len(parts) >= 3 and parts[:2] in (["data", "generate"], ["model", "extra"]):
+    if len(parts) >= 3 and parts[:2] in FREE_TABLES:
         table = getattr(getattr(config, parts[0]), parts[1])
         name = ".".join(parts[2:])
         if parts[1] == "generate":
@@ -214,125 +177,33 @@ def set_value(config: TrainConfig, key: str, value, where: str | None = "config"
         else:
             table[name] = value
         return
-    owner, name = _resolve(config, parts, key, where)
-    hint = _hints(type(owner))[name]
-    if hint is dict:
-        if not isinstance(value, dict):
-            raise InputError(f"expected a table, got {value!r}", source=where, field=key)
-        value = dict(value)
-        if key == "data.generate":
-            value = {k: _check_generate_entry(k, v, where, f"{key}.{k}") for k, v in value.items()}
-    else:
-        value = check_type(value, hint, key, where)
+    owner, name = resolve(config, key, where, DERIVED_MODEL_KEYS)
+    value = check_type(value, field_types(type(owner))[name], key, where)
+    if key == "data.generate":
+        value = {k: _check_generate_entry(k, v, where, f"{key}.{k}") for k, v in value.items()}
     setattr(owner, name, value)
 
 
 def _check_generate_entry(name: str, value, where: str | None, key: str):
-    hints = _hints(DataSettings)
+    hints = field_types(DataSettings)
     if name not in hints:
         known = ", ".join(f.name for f in fields(DataSettings))
         raise InputError(f"not a make-data setting (known: {known})", source=where, field=key)
     return check_type(value, hints[name], key, where)
 
 
-def _type_name(hint) -> str:
-    if hint is float:
-        return "a number"
-    if hint is int:
-        return "an integer"
-    if hint is bool:
-        return "true or false"
-    if hint is str:
-        return "a string"
-    return f"a value of type {getattr(hint, '__name__', hint)}"
-
-
-def check_type(value, hint, key: str, where: str | None = "config"):
-    """``value`` converted to the field type ``hint`` (int → float, list → tuple) or InputError."""
-    origin = typing.get_origin(hint)
-    if origin in (typing.Union, types.UnionType):
-        options = typing.get_args(hint)
-        if value is None and type(None) in options:
-            return None
-        last = None
-        for option in options:
-            if option is type(None):
-                continue
-            try:
-                return check_type(value, option, key, where)
-            except InputError as e:
-                last = e
-        raise last
-    if origin is tuple:
-        args = typing.get_args(hint)
-        if not isinstance(value, (list, tuple)):
-            raise InputError(f"expected a list, got {value!r}", source=where, field=key)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(check_type(v, args[0], key, where) for v in value)
-        if len(value) != len(args):
-            raise InputError(f"expected {len(args)} values, got {value!r}", where, key)
-        return tuple(check_type(v, a, key, where) for v, a in zip(value, args, strict=True))
-    if hint is bool:
-        if isinstance(value, bool):
-            return value
-    elif hint is int:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return value
-    elif hint is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-    elif hint is str:
-        if isinstance(value, str):
-            return value
-    elif hint is dict:
-        if isinstance(value, dict):
-            return value
-    else:  # pragma: no cover - every field type is handled above
-        return value
-    raise InputError(f"expected {_type_name(hint)}, got {value!r}", source=where, field=key)
-
-
-def parse_override(text: str) -> tuple[str, str]:
-    """``"optim.lr=3e-4"`` → ``("optim.lr", "3e-4")``."""
-    key, sep, value = text.partition("=")
-    key = key.strip()
-    if not sep or not key:
-        raise InputError("expected KEY=VALUE (e.g. optim.lr=3e-4)", field=text)
-    return key, value.strip()
-
-
 def _field_hint(key: str):
     """The type of dotted ``key`` (None for free-form entries such as model.extra.*)."""
     parts = key.split(".")
     if len(parts) >= 3 and parts[:2] == ["data", "generate"]:
-        return _hints(DataSettings).get(".".join(parts[2:]))
+        return field_types(DataSettings).get(".".join(parts[2:]))
     if len(parts) >= 3 and parts[:2] == ["model", "extra"]:
         return None
     try:
-        owner, name = _resolve(TrainConfig(), parts, key, "override")
+        owner, name = resolve(TrainConfig(), key, "override", DERIVED_MODEL_KEYS)
     except InputError:
         return None
-    return _hints(type(owner))[name]
-
-
-def parse_value(text: str, hint) -> object:
-    """An override's text as a value: plain text for string fields, otherwise a TOML literal
-    (``3e-4``, ``true``, ``[16, 32]``, ``"text"``), falling back to plain text."""
-    if hint is str:
-        if len(text) >= 2 and text[0] == text[-1] and text[0] in "\"'":
-            return text[1:-1]
-        return text
-    if tomllib is not None:
-        try:
-            return tomllib.loads(f"value = {text}")["value"]
-        except tomllib.TOMLDecodeError:
-            pass
-    else:  # pragma: no cover
-        try:
-            return json.loads(text)
-        except json.JSONDecodeError:
-            pass
-    return text
+    return field_types(type(owner))[name]
 
 
 def apply_overrides(config: TrainConfig, overrides: list[str]) -> TrainConfig:
@@ -343,40 +214,12 @@ def apply_overrides(config: TrainConfig, overrides: list[str]) -> TrainConfig:
     return config.validated()
 
 
-def read_config_file(path: str | os.PathLike) -> dict:
-    """The nested table of a .toml or .json config file (InputError naming the file)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("config file not found", source=str(path))
-    suffix = path.suffix.lower()
-    try:
-        if suffix == ".toml":
-            if tomllib is None:  # pragma: no cover
-                raise InputError("TOML needs Python ≥ 3.11 or tomli; use JSON", str(path))
-            with path.open("rb") as f:
-                return tomllib.load(f)
-        if suffix == ".json":
-            data = json.loads(path.read_text())
-            if not isinstance(data, dict):
-                raise InputError("expected a JSON object of sections", source=str(path))
-            return data
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"cannot read ({e})", source=str(path)) from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"not valid JSON ({e})", source=str(path)) from None
-    except Exception as e:  # tomllib.TOMLDecodeError (module may be tomli)
-        if tomllib is not None and isinstance(e, tomllib.TOMLDecodeError):
-            raise InputError(f"not valid TOML ({e})", source=str(path)) from None
-        raise
-    raise InputError("expected a .toml or .json file", source=str(path))
-
-
 def load_config(path: str | os.PathLike | None, overrides: list[str] = ()) -> TrainConfig:
     """Defaults ← the file at ``path`` (if any) ← ``overrides``, validated."""
     config = TrainConfig()
     if path is not None:
         where = str(path)
-        for key, value in _flatten(read_config_file(path), where):
+        for key, value in flatten(read_table(path), where, _is_dict_field):
             set_value(config, key, value, where)
         try:
             config.validated()

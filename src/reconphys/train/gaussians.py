@@ -36,16 +36,19 @@ CHECKPOINT = "checkpoint.pt"
 
 @dataclass
 class GaussianTrainSettings:
-    data: str
-    out: str
-    split: str = "train"
-    steps: int = 2000
-    batch_size: int = 4
-    lr: float = 1e-3
+    """What ``train-gs`` runs: its flags and its ``--config`` file (configs/gs_cpu_small.toml)
+    set these fields; ``reconphys.config_loader`` type-checks them."""
+
+    data: str  # dataset folder written by make-data
+    out: str  # output folder: model, log, checkpoint (a rerun resumes)
+    split: str = "train"  # the dataset split trained on
+    steps: int = 2000  # optimiser steps
+    batch_size: int = 4  # samples per step
+    lr: float = 1e-3  # peak learning rate (cosine to min_lr_ratio × lr)
     min_lr_ratio: float = 0.1
-    silhouette_weight: float = 1.0
-    seed: int = 0
-    checkpoint_every: int = 200
+    silhouette_weight: float = 1.0  # weight of the alpha-vs-mask loss
+    seed: int = 0  # initialisation and batch order
+    checkpoint_every: int = 200  # steps between checkpoints
     predictor: dict = field(default_factory=dict)  # GaussianPredictorConfig overrides
 
 

@@ -1,0 +1,112 @@
+"""``reconphys predict``: one recording of a dropped object → an asset (docs/usage.md)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import typer
+
+from ..errors import InputError
+from ..io import check_new_output
+from ._common import DEVICE_CHOICES, user_errors
+
+app = typer.Typer()
+
+TIMING_ORDER = (
+    "model_load",
+    "decode",
+    "gaussians",
+    "physics_network",
+    "asset_build",
+    "refine",
+    "write",
+    "preview",
+)
+
+
+@app.command("predict")
+@user_errors
+def predict_command(
+    input: Path = typer.Argument(
+        ..., help="Video file (mp4/mov/gif/...), folder of frames, or a dataset folder (--sample)."
+    ),
+    out: Path = typer.Option(..., "--out", help="Asset folder to write (DESIGN §6 + preview)."),
+    gaussians: Path = typer.Option(
+        None, help="Gaussian PLY of the object (default: predicted from frame 0)."
+    ),
+    masks: Path = typer.Option(None, help="Folder of object masks, one image per frame."),
+    background: Path = typer.Option(None, help="Clean plate image for background subtraction."),
+    camera: Path = typer.Option(None, help="Camera JSON (K, world_to_cam, ground_height)."),
+    fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
+    sample: str = typer.Option(None, help="Dataset input: the sample id."),
+    view: int = typer.Option(None, help="Dataset input: the view (default: the model's)."),
+    model: Path = typer.Option(None, help="Physics predictor (default: the shipped model)."),
+    geometry: str = typer.Option(
+        "auto",
+        help="auto (--gaussians, else a dataset's true Gaussians, else the 3DGS predictor) or "
+        "predicted (the 3DGS predictor even for a dataset sample).",
+    ),
+    gs_model: Path = typer.Option(None, help="3DGS predictor (default: the shipped one)."),
+    placement: str = typer.Option("auto", help="Given PLY: auto, as-is or fit (to frame 0)."),
+    ground: str = typer.Option(
+        "camera", help="Ground plane: camera (its file's ground_height, else 0) or landed."
+    ),
+    anchors: int = typer.Option(None, help="Anchors N_A (default: the model's training data)."),
+    refine: int = typer.Option(0, "--refine", help="Test-time refinement steps (0: none)."),
+    refine_resolution: int = typer.Option(64, help="Render size of the refinement, pixels."),
+    preview_frames: int = typer.Option(60, help="Frames in preview.mp4 (0: no preview)."),
+    device: str = typer.Option("auto", help=f"{DEVICE_CHOICES}."),
+    overwrite: bool = typer.Option(False, help="Replace an existing OUT."),
+):
+    """Predict a simulation-ready asset from one recording of a dropped object: OUT gets the
+    asset (gaussians.ply, anchors.npz, binding.npz, physics.json), preview.mp4/.png (observed |
+    simulated) and prediction.json (attributes, timings, how each input was read)."""
+    from ..devices import resolve_device
+    from ..pipeline.predict import predict, write_outputs
+
+    check_new_output(out, overwrite)
+    if fps is not None and not (math.isfinite(fps) and fps > 0):
+        raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
+    if anchors is not None and anchors < 4:
+        raise InputError(f"must be ≥ 4, got {anchors}", field="--anchors")
+    if preview_frames < 0:
+        raise InputError(f"must be ≥ 0, got {preview_frames}", field="--preview-frames")
+    torch_device = resolve_device(device)
+    result = predict(
+        input,
+        gaussians=gaussians,
+        masks=masks,
+        background=background,
+        camera=camera,
+        fps=fps,
+        sample=sample,
+        view=view,
+        model=model,
+        geometry=geometry,
+        gs_model=gs_model,
+        placement=placement,
+        ground=ground,
+        num_anchors=anchors,
+        refine_steps=refine,
+        refine_resolution=refine_resolution,
+        device=torch_device,
+        progress=True,
+    )
+    summary = write_outputs(result, out, overwrite, preview_frames, torch_device)
+    attributes = summary["attributes"]
+    typer.echo(
+        f"wrote {out}: mass {attributes['mass']:.3g} kg/anchor, stiffness "
+        f"{attributes['stiffness']:.4g}, damping {attributes['damping']:.3g}, friction "
+        f"{attributes['friction']:.2f} ({summary['anchors']} anchors, {summary['gaussians']} "
+        f"Gaussians; geometry: {summary['geometry']})"
+    )
+    if "refine" in summary:
+        r = summary["refine"]
+        typer.echo(
+            f"refine: {r['steps']} steps in {r['seconds']} s, photometric loss "
+            f"{r['loss_initial']:.3g} → {r['loss_best']:.3g} (best at step {r['best_step']})"
+        )
+    timings = summary["timings_s"]
+    parts = [f"{k} {timings[k]:.3f}" for k in TIMING_ORDER if k in timings]
+    typer.echo("seconds: " + ", ".join(parts))

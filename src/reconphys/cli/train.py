@@ -1,0 +1,123 @@
+"""Training commands: ``train`` (the physics predictor) and ``train-gs`` (the 3DGS predictor);
+both read a config file into their settings dataclass (docs/training.md, docs/usage.md)."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import typer
+
+from ..errors import InputError
+from ._common import given_options, user_errors
+
+app = typer.Typer()
+
+
+@app.command("train")
+@user_errors
+def train(
+    config: Path = typer.Argument(..., help="Config file (.toml or .json): see configs/."),
+    overrides: list[str] = typer.Argument(
+        None, help="KEY=VALUE overrides with dotted keys, e.g. optim.lr=3e-4 train.steps=200."
+    ),
+    overwrite: bool = typer.Option(
+        False, help="Start again: remove OUT's checkpoint, logs and model instead of resuming."
+    ),
+    progress: bool = typer.Option(True, help="Show a progress bar (else a line per log_every)."),
+):
+    """Train the physics predictor: self-supervised (photometric loss through simulator and
+    renderer), supervised or mixed. Resumes from OUT/checkpoint.pt when there is one; runs
+    under torchrun for DDP. Writes OUT/log.jsonl, OUT/checkpoint.pt, OUT/model.safetensors and
+    OUT/model.json (OUT = train.out)."""
+    from ..train.config import load_config
+    from ..train.trainer import train as run_training
+
+    settings = load_config(config, overrides or [])
+    result = run_training(settings, overwrite=overwrite, progress=progress, log=typer.echo)
+    if int(os.environ.get("RANK", "0")) != 0:
+        return  # under torchrun: rank 0 reports
+    if result.records or result.first_step == 1:
+        last = result.records[-1] if result.records else {}
+        typer.echo(
+            f"trained {result.step} steps ({result.seconds:.0f} s in total), final loss "
+            f"{last.get('loss', float('nan')):.5g}: {result.out / 'model.safetensors'}"
+        )
+    else:
+        typer.echo(f"{result.out} already has {result.step} steps (train.steps); nothing to do")
+
+
+# train-gs options that are fields of GaussianTrainSettings (the rest: how the run is executed)
+GS_SETTINGS = (
+    "data",
+    "out",
+    "steps",
+    "batch_size",
+    "lr",
+    "silhouette_weight",
+    "checkpoint_every",
+    "seed",
+)
+
+
+@app.command("train-gs")
+@user_errors
+def train_gs(
+    ctx: typer.Context,
+    data: Path = typer.Option(
+        None, "--data", help="Dataset folder written by make-data (required; or data in --config)."
+    ),
+    out: Path = typer.Option(
+        None, "--out", help="Output folder (resumes when run again; required; or out in --config)."
+    ),
+    steps: int = typer.Option(2000, help="Optimiser steps."),
+    batch_size: int = typer.Option(4, help="Samples per step."),
+    lr: float = typer.Option(1e-3, help="Peak learning rate (cosine to 10 %)."),
+    silhouette_weight: float = typer.Option(1.0, help="Weight of the alpha-vs-mask loss."),
+    checkpoint_every: int = typer.Option(200, help="Steps between checkpoints."),
+    seed: int = typer.Option(0, help="Seed of the initialisation and the batches."),
+    threads: int = typer.Option(2, help="CPU threads (torch)."),
+    no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
+    config: Path = typer.Option(
+        None,
+        "--config",
+        help="TOML/JSON file of GaussianTrainSettings fields (e.g. configs/gs_cpu_small.toml); "
+        "options given here override it.",
+    ),
+):
+    """Train the feed-forward 3DGS predictor (first frame → one Gaussian per object pixel) on
+    frame 0 of a dataset's four views; writes OUT/model.safetensors + model.json."""
+    from ..config_loader import load_settings, read_table
+    from ..threads import set_cpu_threads
+    from ..train.gaussians import GaussianTrainSettings, train_gaussian_predictor
+
+    given = given_options(ctx)
+    options = {name: ctx.params[name] for name in GS_SETTINGS}
+    options = {
+        k: str(v) if isinstance(v, Path) else v
+        for k, v in options.items()
+        if v is not None and (config is None or k in given)
+    }
+    layers = [(options, None)]
+    if config is not None:
+        layers.insert(0, (read_table(config), str(config)))
+    for name in ("data", "out"):
+        if not any(name in table for table, _ in layers):
+            raise InputError(f"missing (give --{name} or set {name} in --config)", f"--{name}")
+    settings = load_settings(GaussianTrainSettings, *layers)
+    for name, value in (
+        ("--steps", settings.steps),
+        ("--batch-size", settings.batch_size),
+        ("--checkpoint-every", settings.checkpoint_every),
+        ("--threads", threads),
+    ):
+        if value < 1:
+            raise InputError(f"must be ≥ 1, got {value}", field=name)
+    if not (math.isfinite(settings.lr) and settings.lr > 0):
+        raise InputError(f"must be a positive number, got {settings.lr}", field="--lr")
+    if not Path(settings.data).is_dir():
+        raise InputError("dataset folder not found", source=settings.data)
+    set_cpu_threads(threads)
+    train_gaussian_predictor(settings, progress=not no_progress, log=typer.echo)
+    typer.echo(f"wrote {Path(settings.out) / 'model.safetensors'}")
