@@ -13,24 +13,11 @@ from reconphys import __version__
 from reconphys.cli import app
 
 runner = CliRunner()
-SMALL = [
-    "--num-gaussians",
-    "400",
-    "--num-anchors",
-    "48",
-    "--neighbors",
-    "8",
-    "--min-substeps",
-    "10",
-]
 
 
 @pytest.fixture(scope="module")
-def asset_dir(tmp_path_factory):
-    out = tmp_path_factory.mktemp("cli") / "asset"
-    result = runner.invoke(app, ["make-asset", str(out), "--shape", "sphere", *SMALL])
-    assert result.exit_code == 0, result.output
-    return out
+def asset_dir(small_asset_dir):
+    return small_asset_dir
 
 
 def test_version_and_help():
