@@ -1,10 +1,10 @@
 """Renderer throughput: images per second of the torch reference beside its fast twins (numba on
 CPU, gsplat on CUDA), measured in one run.
 
-One "render" is the 4 dataset views (DESIGN §3) of a random 0.5 m object; the table reports the
-time per render and images per second (4 images per render), forward only (no autograd) and forward
-+ backward (a photometric-style loss back to means, quats, scales, opacities and colours). The
-issue-10 CPU target is the 128² × 2,048-Gaussian row: forward + backward ≤ 50 ms.
+One "render" is the 4 dataset views (docs/design.md#conventions) of a random 0.5 m object; the table
+reports the time per render and images per second (4 images per render), forward only (no autograd)
+and forward + backward (a photometric-style loss back to means, quats, scales, opacities and
+colours). The issue-10 CPU target is the 128² × 2,048-Gaussian row: forward + backward ≤ 50 ms.
 
     python benchmarks/bench_renderer.py                 # CUDA if available, else CPU (~1–2 min)
     python benchmarks/bench_renderer.py --device cpu --quick

@@ -1,11 +1,11 @@
 """Fused Triton simulator vs the PyTorch reference: trajectories, gradients and the training cost.
 
 Drops B objects (balls of N_A anchors, K-nearest-neighbour springs) with different attributes
-from the DESIGN §5 ranges, so that they hit the ground and bounce/slide within the clip; runs the
-rollout with ``method="adjoint"`` (PyTorch forward, exact hand-written backward; itself checked
-against autograd in tests/test_physics_adjoint.py) and ``method="fused"``; prints the largest
-trajectory difference (metres) and relative gradient differences for m, k, d, f, v0, x0 and rest
-lengths, and the time of a 20-frame × 100-substep rollout with its backward (issue 3's
+from the docs/design.md#attribute-ranges ranges, so that they hit the ground and bounce/slide within
+the clip; runs the rollout with ``method="adjoint"`` (PyTorch forward, exact hand-written backward;
+itself checked against autograd in tests/test_physics_adjoint.py) and ``method="fused"``; prints the
+largest trajectory difference (metres) and relative gradient differences for m, k, d, f, v0, x0 and
+rest lengths, and the time of a 20-frame × 100-substep rollout with its backward (issue 3's
 training-sample cost).
 
     python benchmarks/check_fused_vs_reference.py                       # CUDA: 8 × 2048, 30 frames

@@ -24,6 +24,8 @@ DOC_POINTER = re.compile(r"(?<![\w/.-])docs/([\w.-]+\.md)(?:#([\w-]+))?")
 MARKDOWN_LINK = re.compile(r"!?\[[^\]]*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
 HEADING = re.compile(r"^ {0,3}(#{1,6})[ \t]+(.*?)[ \t]*#*[ \t]*$")
 FENCE = re.compile(r"^ {0,3}(`{3,}|~{3,})")
+# A cited test or benchmark file (e.g. ``tests/test_physics_stability.py``) must exist.
+CITED_FILE = re.compile(r"(?<![\w/.-])((?:tests|benchmarks)/[\w/]+\.py)")
 HTML_ANCHOR = re.compile(r"<a\s+(?:name|id)=\"([^\"]+)\"")
 
 
@@ -66,7 +68,8 @@ def scanned_files() -> list[Path]:
     files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
     for name in SCANNED:
         for path in sorted((ROOT / name).rglob("*")):
-            if "__pycache__" in path.parts or not path.is_file() or path.suffix not in SUFFIXES:
+            skip = "__pycache__" in path.parts or any(p.endswith(".egg-info") for p in path.parts)
+            if skip or not path.is_file() or path.suffix not in SUFFIXES:
                 continue
             files.append(path)
     return [f for f in files if f.is_file()]
@@ -85,6 +88,9 @@ def problems_in(path: Path) -> list[str]:
                 out.append(f"{where}: {word!r} (point to docs/design.md#<heading> instead)")
         for match in DOC_POINTER.finditer(line):
             out += check_target(ROOT / "docs" / match.group(1), match.group(2), where)
+        for match in CITED_FILE.finditer(line):
+            if not (ROOT / match.group(1)).is_file():
+                out.append(f"{where}: cites {match.group(1)}, which does not exist")
         if markdown:
             for match in MARKDOWN_LINK.finditer(line):
                 out += check_link(path, match.group(1), where)

@@ -1,4 +1,5 @@
-"""The asset folder (DESIGN §6): Gaussians + anchors + springs + binding + physical attributes.
+"""The asset folder (docs/design.md#asset-format): Gaussians + anchors + springs + binding +
+physical attributes.
 
 Layout::
 
@@ -173,7 +174,8 @@ class Asset:
         self,
         anchors: Tensor,  # [..., N_A, 3] anchor positions (e.g. per frame [T, N_A, 3]), metres
     ) -> Tensor:  # [..., N, 3] metres, on anchors' device
-        """Gaussian centres following the anchors through the asset's binding (DESIGN §4)."""
+        """Gaussian centres following the anchors through the asset's binding
+        (docs/design.md#physical-model)."""
         device = anchors.device
         return deform_means(
             self.gaussians.means.to(device),

@@ -8,7 +8,8 @@
   ``flexcomp`` and the springs as its edges, on a ground plane.
 
 Both engines use linear springs, ``F = ke (L − l) + kd (v_rel · u)``. Ours is
-``F = k ε (1 + |ε|)^p_k + (d / l) (v_rel · u)`` with ``ε = L / l − 1`` (DESIGN §4), so per spring
+``F = k ε (1 + |ε|)^p_k + (d / l) (v_rel · u)`` with ``ε = L / l − 1``
+(docs/design.md#physical-model), so per spring
 ``ke = k / l`` (N/m) — exact for ``p_k = 0`` and the small-strain tangent otherwise — and
 ``kd = d / l`` (N·s/m). :func:`spring_coefficients` forms them from the simulator's own model.
 

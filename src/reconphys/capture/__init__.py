@@ -1,4 +1,4 @@
-"""From a user's recording to an observation the models read (issue 7, docs/usage.md).
+"""From a user's recording to an observation the models read (docs/usage.md#the-input).
 
 - :mod:`.video`      decode a video file or a folder of frames; resample time to ``frame_dt``
 - :mod:`.masks`      the object's mask: a mask folder, an alpha channel or background subtraction

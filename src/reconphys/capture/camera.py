@@ -1,6 +1,6 @@
 """The camera of a recording: a JSON file, or the default (the dataset's view 0).
 
-Camera file (``--camera cam.json``; OpenCV convention, DESIGN §3)::
+Camera file (``--camera cam.json``; OpenCV convention, docs/design.md#conventions)::
 
     {
       "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],       pixels, at the size given below
@@ -69,7 +69,7 @@ class CameraSpec:
 
 
 def default_camera(width: int, height: int, view: int = 0) -> CameraSpec:
-    """The dataset's view ``view`` at ``width × height`` (DESIGN §3)."""
+    """The dataset's view ``view`` at ``width × height`` (docs/design.md#conventions)."""
     from ..render.cameras import dataset_view
 
     camera = dataset_view(width, height, view)

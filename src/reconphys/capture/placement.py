@@ -22,7 +22,7 @@ from ..assets.gaussians import Gaussians
 from ..physics import GRAVITY
 from .camera import CameraSpec
 
-GRAVITY_MAGNITUDE = -GRAVITY[2]  # m/s², along −z (DESIGN §3)
+GRAVITY_MAGNITUDE = -GRAVITY[2]  # m/s², along −z (docs/design.md#conventions)
 
 
 def project(points: Tensor, camera: CameraSpec) -> tuple[Tensor, Tensor]:

@@ -31,7 +31,9 @@ def predict_command(
     input: Path = typer.Argument(
         ..., help="Video file (mp4/mov/gif/...), folder of frames, or a dataset folder (--sample)."
     ),
-    out: Path = typer.Option(..., "--out", help="Asset folder to write (DESIGN §6 + preview)."),
+    out: Path = typer.Option(
+        ..., "--out", help="Asset folder to write (docs/assets.md + preview)."
+    ),
     gaussians: Path = typer.Option(
         None, help="Gaussian PLY of the object (default: predicted from frame 0)."
     ),

@@ -1,5 +1,6 @@
-"""Synthetic dataset pipeline (DESIGN §5, §7): objects → Gaussians → sampled physics → 30-frame,
-4-view drop videos, written resumably (``make-data``) or generated on the fly.
+"""Synthetic dataset pipeline (docs/design.md#attribute-ranges, docs/design.md#synthetic-dataset):
+objects → Gaussians → sampled physics → 30-frame, 4-view drop videos, written resumably
+(``make-data``) or generated on the fly.
 
 - :mod:`.settings`  what to generate (and the presets)
 - :mod:`.sources`   procedural shapes, mesh folders, pybullet meshes, :mod:`.objaverse`

@@ -36,7 +36,7 @@ class GeneratedSample:
 
 
 def dataset_cameras(settings: DataSettings, device=None) -> Cameras:
-    """The four views of DESIGN §3 at the dataset's resolution."""
+    """The four views of docs/design.md#conventions at the dataset's resolution."""
     return dataset_views(
         settings.resolution,
         settings.resolution,

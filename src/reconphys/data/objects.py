@@ -1,10 +1,10 @@
 """Canonical objects and the per-sample assets made from them.
 
 A canonical object is stored once per dataset object: Gaussians in the object's own frame (centred,
-normalised), its volume anchors (seeded by the object id, DESIGN §3), the kNN springs with their
-rest lengths, and the binding. A sample places it by a rigid motion (rotation, then translation):
-springs, rest lengths and binding are invariant under it, so they are reused as they are, and
-every sample of an object has the same anchors.
+normalised), its volume anchors (seeded by the object id, docs/design.md#conventions), the kNN
+springs with their rest lengths, and the binding. A sample places it by a rigid motion (rotation,
+then translation): springs, rest lengths and binding are invariant under it, so they are reused as
+they are, and every sample of an object has the same anchors.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Per-sample randomness: physical attributes, orientation, initial velocity and drop height.
 
-Distributions (documented in docs/dataset.md; ranges from DESIGN §5):
+Distributions (documented in docs/dataset.md; ranges from docs/design.md#attribute-ranges):
 
 - mass m (kg per anchor), stiffness k (N per unit strain), damping d (N·s per unit strain rate):
   uniform on their ranges (the paper's protocol) or log-uniform (``distribution="log-uniform"``),

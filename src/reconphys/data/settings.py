@@ -1,4 +1,5 @@
-"""Generation settings of a synthetic dataset (DESIGN §5, §7) and the presets.
+"""Generation settings of a synthetic dataset (docs/design.md#attribute-ranges,
+docs/design.md#synthetic-dataset) and the presets.
 
 Every number that changes what ``make-data`` writes lives in :class:`DataSettings`; the manifest
 stores them, a resumed run must use the same ones, and :meth:`DataSettings.fingerprint` tags every
@@ -120,7 +121,8 @@ class DataSettings:
             low, high = getattr(self, f"{name}_range")
             if not (allowed[0] <= low <= high <= allowed[1]):
                 raise InputError(
-                    f"[{low}, {high}] must lie inside DESIGN §5's [{allowed[0]}, {allowed[1]}]",
+                    f"[{low}, {high}] must lie inside the range of docs/design.md#attribute-ranges "
+                    f"[{allowed[0]}, {allowed[1]}]",
                     field=f"{name}_range",
                 )
         first, last = self.contact_frame_range
@@ -141,7 +143,8 @@ PRESETS: dict[str, DataSettings] = {
     # CPU-sized: the acceptance run (3 objects × 2 samples at 32 px) takes well under a minute.
     "small": DataSettings(),
     # The paper's protocol (ReconPhys §4.1): 450 × 10 training, 46 × 2 test samples at 512²,
-    # with the model defaults of DESIGN §4 (N_A 2048, K 32) and 20 000 Gaussians per object.
+    # with the model defaults of docs/design.md#physical-model (N_A 2048, K 32) and 20 000 Gaussians
+    # per object.
     "paper": DataSettings(
         objects=450,
         test_objects=46,

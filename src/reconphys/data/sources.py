@@ -1,5 +1,6 @@
 """Where the dataset's objects come from: procedural shapes, a folder of meshes, pybullet's meshes,
-or a local Objaverse mirror — each turned into normalised Gaussians (DESIGN §7).
+or a local Objaverse mirror — each turned into normalised Gaussians
+(docs/design.md#synthetic-dataset).
 
 A source lists candidate objects (:class:`ObjectRef`, identified by a stable string id) and turns
 one into Gaussians centred on the origin with their largest bounding-box side ``settings.size``

@@ -1,1 +1,1 @@
-"""Evaluation: metrics (DESIGN §9), methods and reports."""
+"""Evaluation: metrics (docs/design.md#evaluation), methods and reports."""

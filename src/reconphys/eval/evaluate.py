@@ -41,7 +41,8 @@ from .metrics import (
 )
 from .samples import EvalSample, EvalSet, TrivialAttributes
 
-INPUT_FRAMES = 20  # frames 0–19: input and reconstruction window; 20–29: future (DESIGN §3)
+INPUT_FRAMES = 20  # frames 0–19: input and reconstruction window; 20–29: future
+# (docs/design.md#conventions)
 FRAMES_PER_RENDER_CALL = 8  # bounds renderer memory at large resolutions
 INITIAL_SUFFIX = "_initial"  # row of a method's initial guess (springgaus_initial)
 

@@ -1,4 +1,5 @@
-"""Evaluation metrics (DESIGN §9): image scores on the object, point-set distances, attributes.
+"""Evaluation metrics (docs/design.md#evaluation): image scores on the object, point-set distances,
+attributes.
 
 Image protocol (as in the reference evaluation): images are RGB in [0, 1] on a black background;
 a pixel belongs to the object when any channel of the *ground truth* is ≥ 10/255 (0.0392), and
@@ -163,7 +164,8 @@ OBSERVABLES = ("log_k_over_m", "log_d_over_m", "friction")
 
 
 def observable_attributes(attributes: dict[str, Tensor]) -> dict[str, Tensor]:
-    """The combinations a video determines (DESIGN §4): log(k/m), log(d/m) and f."""
+    """The combinations a video determines (docs/design.md#physical-model): log(k/m), log(d/m) and
+    f."""
     return {
         "log_k_over_m": torch.log(attributes["stiffness"] / attributes["mass"]),
         "log_d_over_m": torch.log(attributes["damping"] / attributes["mass"]),

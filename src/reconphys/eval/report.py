@@ -318,7 +318,8 @@ def _table_attributes(document: dict) -> list[str]:
     lines = [
         "## Table 3 — attribute errors (MAE over samples)",
         "",
-        "Mass, stiffness and damping are not observable from video one by one (DESIGN §4: "
+        "Mass, stiffness and damping are not observable from video one by one "
+        "(docs/design.md#physical-model: "
         "scaling m, k, d together leaves the motion unchanged); log(k/m), log(d/m) and friction "
         "are. Compare every row with trivial.",
         "",

@@ -26,8 +26,9 @@ from ..render import Cameras
 SPLITS = ("test", "train", "all")
 
 # The trivial predictor's values when a folder has no training split: the medians of the paper
-# protocol's uniform attribute ranges (DESIGN §5), i.e. the midpoints. They stand in for "the
-# medians of the shipped model's training data" until a model is shipped with its own.
+# protocol's uniform attribute ranges (docs/design.md#attribute-ranges), i.e. the midpoints. They
+# stand in for "the medians of the shipped model's training data" until a model is shipped with its
+# own.
 FALLBACK_MEDIANS = {name: 0.5 * (low + high) for name, (low, high) in ATTRIBUTE_RANGES.items()}
 
 
@@ -105,7 +106,8 @@ class EvalSet:
         if not train:
             return TrivialAttributes(
                 dict(FALLBACK_MEDIANS),
-                "no training split: midpoints of the DESIGN §5 ranges (medians of the paper's "
+                "no training split: midpoints of the docs/design.md#attribute-ranges ranges "
+                "(medians of the paper's "
                 "uniform training distribution)",
             )
         values = {name: float(statistics.median(a[name] for a in train)) for name in ATTRIBUTES}

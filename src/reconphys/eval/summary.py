@@ -26,7 +26,8 @@ ATTRIBUTE_KEYS = (*ATTRIBUTES, "log_k_over_m", "log_d_over_m")
 
 
 def windows(num_frames: int) -> dict[str, tuple[int, int]]:
-    """Frame ranges [start, stop) of the two windows (DESIGN §3, §9)."""
+    """Frame ranges
+    [start, stop) of the two windows (docs/design.md#conventions, docs/design.md#evaluation)."""
     return {
         "reconstruction": (0, min(INPUT_FRAMES, num_frames)),
         "future": (min(INPUT_FRAMES, num_frames), num_frames),

@@ -107,7 +107,8 @@ class Interaction:
 
     @property
     def attributes(self) -> dict[str, float]:
-        """The scalar attributes in use (m kg per anchor, k, d, f); see DESIGN §4."""
+        """The scalar attributes in use (m kg per anchor, k, d, f); see
+        docs/design.md#physical-model."""
         return dict(self._attributes)
 
     def state(self) -> State:
@@ -122,7 +123,8 @@ class Interaction:
         return x[0].detach().cpu().clone()
 
     def gaussian_means(self) -> Tensor:  # [N, 3] metres, CPU
-        """Centres of the Gaussians following the latest anchor positions (DESIGN §4 binding)."""
+        """Centres of the Gaussians following the latest anchor positions
+        (docs/design.md#binding)."""
         with self._lock:
             x = self._state.x
         with torch.no_grad():

@@ -2,8 +2,9 @@
 ``simulate`` writes), ``interaction.json`` (grip positions and substeps per frame) and
 ``interaction.mp4``.
 
-Frames are rendered after the recording stops, with the project's renderer (DESIGN §3: the object
-alone on black), so recording costs the live simulation nothing but a copy of each frame's state.
+Frames are rendered after the recording stops, with the project's renderer
+(docs/design.md#conventions: the object alone on black), so recording costs the live simulation
+nothing but a copy of each frame's state.
 """
 
 from __future__ import annotations

@@ -1,1 +1,2 @@
-"""Networks: the physics predictor (video → attributes); the 3DGS predictor follows (DESIGN §8)."""
+"""Networks: the physics predictor (video → attributes); the 3DGS predictor follows
+(docs/design.md#models)."""

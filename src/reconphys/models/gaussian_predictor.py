@@ -1,8 +1,8 @@
 """Feed-forward 3DGS predictor: one masked image → one Gaussian per pixel (Splatter-Image style).
 
 The paper's 3DGS branch is a frozen image-to-3D model (TRELLIS) whose weights cannot be had here;
-this is the project's own small replacement (DESIGN §8 (b)). A U-Net reads the image, its mask
-and each pixel's viewing ray and predicts per pixel:
+this is the project's own small replacement (docs/design.md#models (b)). A U-Net reads the image,
+its mask and each pixel's viewing ray and predicts per pixel:
 
 - the depth of the Gaussian along the pixel's ray, ``reference_depth + depth_range · tanh(·)``
   (metres, camera z), and a small 3D offset ``offset_range · tanh(·)`` (metres, camera frame);

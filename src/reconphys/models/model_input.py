@@ -18,7 +18,7 @@ from torch import Tensor
 from ..render.cameras import intrinsics_from_fov
 from .physics_predictor import resize_frames
 
-DATASET_FOV_DEG = 40.0  # the dataset cameras' vertical field of view (DESIGN §3)
+DATASET_FOV_DEG = 40.0  # the dataset cameras' vertical field of view (docs/design.md#conventions)
 SUPERSAMPLE = 4  # the virtual image is sampled at 4× the network's size, then area-averaged
 
 

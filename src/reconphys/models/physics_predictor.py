@@ -1,13 +1,14 @@
-"""Physics predictor (DESIGN §8, paper §3.3): video frames of one view → (m, k, d, f).
+"""Physics predictor (docs/design.md#models, paper §3.3): video frames of one view → (m, k, d, f).
 
 Per-frame encoder → spatio-temporal trunk (3D residual blocks over [time, height, width], then
 self-attention over time) → MLP → four bounded attributes, one value each per object.
 
 Bounded outputs: mass, stiffness and damping span one to two orders of magnitude, so they are
-mapped log-uniformly into the DESIGN §5 ranges, ``exp(log lo + σ(z) (log hi − log lo))``;
-friction is ``σ(z)`` in [0, 1]. :func:`normalize_attributes` is the inverse map to [0, 1]⁴, the
-space of the supervised loss. (The reference code maps linearly and lets friction reach 2.4; we
-keep the data's ranges so that every prediction is a valid, stable simulator input.)
+mapped log-uniformly into the docs/design.md#attribute-ranges ranges,
+``exp(log lo + σ(z) (log hi − log lo))``; friction is ``σ(z)`` in [0, 1].
+:func:`normalize_attributes` is the inverse map to [0, 1]⁴, the space of the supervised loss. (The
+reference code maps linearly and lets friction reach 2.4; we keep the data's ranges so that every
+prediction is a valid, stable simulator input.)
 
 Encoders are looked up by name in :mod:`reconphys.models.encoders`; the default ``small_cnn`` is
 trained from scratch. Pretrained encoders (``timm`` by name, ``transformers`` from a local folder
@@ -214,7 +215,8 @@ def _bounds(name: str) -> tuple[float, float]:
 
 
 def attributes_from_unit(unit: Tensor) -> dict[str, Tensor]:
-    """[..., 4] in [0, 1] → {mass, stiffness, damping, friction} in the DESIGN §5 ranges."""
+    """[..., 4] in [0, 1] → {mass, stiffness, damping, friction} in the
+    docs/design.md#attribute-ranges ranges."""
     out = {}
     for index, name in enumerate(ATTRIBUTES):
         low, high = _bounds(name)

@@ -1,5 +1,6 @@
-"""Assets from predicted geometry (DESIGN §2, §6): the 3DGS predictor's Gaussians from frame 0,
-the initial linear velocity from the masks' free fall, and the asset built from them.
+"""Assets from predicted geometry (docs/design.md#data-flow, docs/design.md#asset-format): the 3DGS
+predictor's Gaussians from frame 0, the initial linear velocity from the masks' free fall, and the
+asset built from them.
 
 Below both training (``data.geometry = "predicted"``, :mod:`reconphys.train.data`) and the user's
 path (:mod:`reconphys.pipeline.predict`), so that neither imports the other.

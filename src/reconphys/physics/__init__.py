@@ -1,5 +1,5 @@
 """Differentiable spring-mass physics: model (topology + attributes), state, stepping, anchors,
-binding, controllers. See DESIGN §4 for the exact equations.
+binding, controllers. See docs/design.md#physical-model for the exact equations.
 
 - :mod:`.reference`: the plain PyTorch substep (:func:`step`), forces, contact and energies.
 - :mod:`.stability`: the stable substep count.

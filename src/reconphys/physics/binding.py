@@ -1,4 +1,5 @@
-"""Binding of Gaussian centres to anchors by inverse-distance weights (DESIGN §4).
+"""Binding of Gaussian centres to anchors by inverse-distance weights
+(docs/design.md#physical-model).
 
 Each Gaussian follows its ``n_b`` nearest anchors (at rest): ``μ_t = μ_0 + Σ_b w_b (x_t − x_0)[b]``
 with ``w ∝ 1 / r^p_b``. Rotation, scale, colour and opacity stay fixed.

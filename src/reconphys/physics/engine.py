@@ -1,5 +1,5 @@
 """The engine interface: what every simulator twin implements (the ``SolverBase.step`` idea of
-NVIDIA Newton, see DESIGN §4 for the equations every engine follows).
+NVIDIA Newton, see docs/design.md#physical-model for the equations every engine follows).
 
 An engine is built once per rollout for one model, one substep length ``dt`` and one batch shape;
 :meth:`Engine.step` then advances positions and velocities by one substep, with an optional

@@ -1,4 +1,5 @@
-"""Spring-mass model: topology (springs, rest lengths) and physical attributes (DESIGN §4).
+"""Spring-mass model: topology (springs, rest lengths) and physical attributes
+(docs/design.md#physical-model).
 
 The model is fixed during a rollout; positions and velocities live in :class:`State`. Attributes may
 be one value per scene or one value per anchor (mass, friction) / per spring (stiffness, damping).
@@ -27,7 +28,8 @@ from torch import Tensor
 GRAVITY = (0.0, 0.0, -9.8)  # m/s², world z up
 ATTRIBUTES = ("mass", "stiffness", "damping", "friction")  # the four the network predicts
 
-# Attribute ranges of the synthetic data (DESIGN §5); the stability bound covers all of them.
+# Attribute ranges of the synthetic data (docs/design.md#attribute-ranges); the stability bound
+# covers all of them.
 ATTRIBUTE_RANGES = {
     "mass": (0.2, 6.0),
     "stiffness": (10.0, 1200.0),

@@ -1,4 +1,5 @@
-"""Semi-implicit Euler stepping of the spring-mass model with ground contact (DESIGN §4).
+"""Semi-implicit Euler stepping of the spring-mass model with ground contact
+(docs/design.md#physical-model).
 
 This is the plain PyTorch reference: differentiable with respect to every attribute (scalar,
 per-anchor or per-spring), the rest lengths and the initial state; CPU or CUDA; float32 or

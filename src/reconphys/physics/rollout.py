@@ -1,4 +1,5 @@
-"""The rollout dispatcher: frames of substeps with the engine that suits the call (DESIGN §4).
+"""The rollout dispatcher: frames of substeps with the engine that suits the call
+(docs/design.md#physical-model).
 
 :func:`rollout` strings substeps into frames with a substep count taken from
 :func:`~reconphys.physics.stability.stable_substeps` and picks the engine

@@ -1,5 +1,5 @@
-"""The substep count that keeps semi-implicit Euler stable (DESIGN §4): a power-iteration bound
-on the spring operator's largest eigenvalues."""
+"""The substep count that keeps semi-implicit Euler stable (docs/design.md#physical-model): a
+power-iteration bound on the spring operator's largest eigenvalues."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The PyTorch engine: the reference substep (:func:`reconphys.physics.reference.step`) and its
-exact vector-Jacobian product, derived by hand below (DESIGN §4).
+exact vector-Jacobian product, derived by hand below (docs/design.md#physical-model).
 
 The VJP matches autograd through :func:`~reconphys.physics.reference.step` exactly, including the
 one-sided choices of its ``clamp`` and ``abs`` at ties. It is also the reference for the fused

@@ -1,4 +1,5 @@
-"""``reconphys predict``: one recording → a simulation-ready asset (DESIGN §2, §6).
+"""``reconphys predict``: one recording → a simulation-ready asset (docs/design.md#data-flow,
+docs/design.md#asset-format).
 
 Steps, each timed (``PredictResult.timings``, seconds):
 
@@ -306,8 +307,9 @@ def write_outputs(
     preview_frames: int = 60,
     device: str | torch.device = "cpu",
 ) -> dict:
-    """Write the asset folder (DESIGN §6) plus ``preview.mp4`` / ``preview.png`` (observed |
-    simulated) and ``prediction.json`` (attributes, timings, details) atomically into ``out``."""
+    """Write the asset folder (docs/design.md#asset-format) plus ``preview.mp4`` / ``preview.png``
+    (observed | simulated) and ``prediction.json`` (attributes, timings, details) atomically into
+    ``out``."""
     import json
 
     from ..assets.asset import write_asset

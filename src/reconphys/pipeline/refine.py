@@ -3,8 +3,9 @@
 The loss is the training objective's (:func:`reconphys.render.photometric.photometric_loss`): the
 asset is simulated from its initial state with self-forcing, rendered into the recording's camera
 and compared with the masked frames 1..T−1 by mean squared error. The mass stays as predicted (a
-video fixes only k/m and d/m, DESIGN §4); log k, log d and the friction (through a logit) are
-optimised with Adam, inside the attribute ranges. The attributes of the lowest loss seen are kept.
+video fixes only k/m and d/m, docs/design.md#physical-model); log k, log d and the friction (through
+a logit) are optimised with Adam, inside the attribute ranges. The attributes of the lowest loss
+seen are kept.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 Three interchangeable backends with the same semantics (gsplat's "classic" 3DGS rasterisation):
 ``"torch"`` (pure PyTorch, any device and dtype, the reference), ``"numba"`` (the same projection,
 compiled CPU compositing with a hand-written backward) and ``"gsplat"`` (CUDA kernels).
-The object is rendered on a black background (DESIGN §3); ``rgb`` is the premultiplied colour.
+The object is rendered on a black background (docs/design.md#conventions); ``rgb`` is the
+premultiplied colour.
 """
 
 from __future__ import annotations

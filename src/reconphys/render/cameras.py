@@ -1,4 +1,4 @@
-"""Pinhole cameras in the OpenCV convention (DESIGN §3).
+"""Pinhole cameras in the OpenCV convention (docs/design.md#conventions).
 
 Camera frame: x right, y down, z forward into the scene. ``K`` maps camera coordinates to pixels,
 ``world_to_cam`` maps world points (metres, z up) to camera coordinates. Pixel ``(u, v)`` covers
@@ -162,7 +162,8 @@ def dataset_views(
     dtype: torch.dtype = torch.float32,
     device: torch.device | str | None = None,
 ) -> Cameras:
-    """The dataset's fixed views (DESIGN §3): cameras on a circle around ``target`` looking at it.
+    """The dataset's fixed views (docs/design.md#conventions): cameras on a circle around ``target``
+    looking at it.
 
     Camera ``i`` sits at distance ``radius`` (metres) from ``target``, at azimuth
     ``azimuths_deg[i]`` about the world z axis (0° = on the +x side of the target, 90° = +y side)

@@ -1,5 +1,6 @@
-"""The photometric loss of a self-forced rollout (DESIGN §8, paper §3.4), shared by training
-(:mod:`reconphys.train.objective`) and test-time refinement (:mod:`reconphys.pipeline.refine`).
+"""The photometric loss of a self-forced rollout (docs/design.md#models, paper §3.4), shared by
+training (:mod:`reconphys.train.objective`) and test-time refinement
+(:mod:`reconphys.pipeline.refine`).
 
 Predicted attributes drive the spring-mass rollout from the scenes' initial state; the rollout
 continues from its own predicted state (self-forcing) and is detached every ``window`` frames

@@ -1,4 +1,5 @@
-"""Pure-PyTorch 3D Gaussian splatting rasteriser: the reference twin of gsplat (DESIGN §10).
+"""Pure-PyTorch 3D Gaussian splatting rasteriser: the reference twin of gsplat
+(docs/design.md#compute).
 
 It reproduces ``gsplat.rasterization(..., packed=False, rasterize_mode="classic", sh_degree=None,
 render_mode="RGB+ED")`` of gsplat 1.5.3 on any device and dtype, with autograd for the backward:

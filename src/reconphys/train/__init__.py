@@ -1,4 +1,4 @@
-"""Training of the physics predictor (DESIGN §8; docs/training.md).
+"""Training of the physics predictor (docs/design.md#models; docs/training.md).
 
 - :mod:`.config`       the config file + ``key=value`` overrides (sections data, model, objective,
                        optim, train)

@@ -54,7 +54,7 @@ class DataConfig:
     preset: str = "small"  # generate only: the make-data preset the overrides below start from
     generate: dict = field(default_factory=dict)  # generate only: DataSettings overrides
     split: str = "train"  # train, test or all
-    view: int = 0  # the input view, 0–3 (DESIGN §3)
+    view: int = 0  # the input view, 0–3 (docs/design.md#conventions)
     all_views: bool = False  # train on every view, each its own video (4× the videos; not eval)
     frames: int = 20  # the predictor reads frames 0..frames−1; the loss compares 1..frames−1
     resolution: int = 64  # predictor input, pixels (square; frames are resized to it)

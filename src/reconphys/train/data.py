@@ -4,7 +4,7 @@
 by ``make-data``, or generation on the fly) and adds to every item the sample's simulation-ready
 asset — the frozen geometry of the self-supervised objective. For now this is the dataset's
 canonical Gaussians, anchors, springs and binding placed as in the sample, i.e. **ground-truth
-geometry** (DESIGN §8 (a): an upper bound, labelled as such in the model's metadata).
+geometry** (docs/design.md#models (a): an upper bound, labelled as such in the model's metadata).
 
 The order is a pure function of ``(seed, epoch)`` (:func:`epoch_permutation`), and the samples of
 optimiser step ``s`` are a pure function of ``(seed, s, rank, world size)``

@@ -1,4 +1,5 @@
-"""Training objectives (DESIGN §8, paper §3.4): self-supervised photometric, supervised, mixed.
+"""Training objectives (docs/design.md#models, paper §3.4): self-supervised photometric, supervised,
+mixed.
 
 Self-supervised: the photometric loss of the self-forced rollout
 (:func:`reconphys.render.photometric.photometric_loss`, shared with test-time refinement).
@@ -21,14 +22,15 @@ from .config import SUPERVISED_TARGETS
 
 
 def _log_ratio_bounds(numerator: str) -> tuple[float, float]:
-    """Bounds of log(numerator / mass) over the DESIGN §5 ranges."""
+    """Bounds of log(numerator / mass) over the docs/design.md#attribute-ranges ranges."""
     (n_low, n_high), (m_low, m_high) = ATTRIBUTE_RANGES[numerator], ATTRIBUTE_RANGES["mass"]
     return math.log(n_low / m_high), math.log(n_high / m_low)
 
 
 def normalize_observables(attributes: Tensor) -> Tensor:
     """[..., 4] attributes (ATTRIBUTES) → [..., 4] (log m, log k/m, log d/m, f), each scaled
-    to [0, 1] over its range: the quantities a video determines (DESIGN §4), and the mass."""
+    to [0, 1] over its range: the quantities a video determines (docs/design.md#physical-model), and
+    the mass."""
     mass, stiffness, damping, friction = attributes.unbind(-1)
     columns = [normalize_attributes(attributes)[..., 0]]
     for name, value in (("stiffness", stiffness), ("damping", damping)):

@@ -1,4 +1,5 @@
-"""The training loop of ``reconphys train`` (DESIGN §8): data → predictor → loss → step → log.
+"""The training loop of ``reconphys train`` (docs/design.md#models): data → predictor → loss → step
+→ log.
 
 One step::
 

@@ -83,7 +83,8 @@ def camera_from_viser(
     aspect: float,  # width / height
     height: int,  # pixels of the rendered image
 ) -> Cameras:
-    """A browser's camera as a one-camera :class:`~reconphys.render.Cameras` (DESIGN §3)."""
+    """A browser's camera as a one-camera :class:`~reconphys.render.Cameras`
+    (docs/design.md#conventions)."""
     width = max(8, 2 * round(height * aspect / 2))
     rotation = quaternion_to_matrix(torch.tensor(wxyz, dtype=torch.float64))
     centre = torch.tensor(position, dtype=torch.float64)

@@ -5,16 +5,16 @@ Stages, all from the frames and cameras only (no ground truth):
 
 1. static: Gaussians of frame 0 fitted to the 4 views (:mod:`.fitting`);
 2. physics model: volume anchors in the fitted Gaussians (seeded by the sample id), kNN springs,
-   inverse-distance binding — the same construction as every asset (DESIGN §4);
+   inverse-distance binding — the same construction as every asset (docs/design.md#physical-model);
 3. velocity: the initial rigid velocity (linear + angular, 6 numbers) fitted on frames 1–4, the
    object still in free fall, with the attributes at their starting values;
 4. dynamics: the attributes fitted on frames 1–19. Each epoch starts from the initial state; per
    frame the simulator advances one frame from the (detached) previous state, the frame is
    rendered in one random view, and Adam takes one step — gradients flow through that frame's
    substeps only, as in Spring-Gaus. The parameters are the observable combinations log(k/m),
-   log(d/m) and friction; the mass, which no video determines (DESIGN §4), stays at the trivial
-   predictor's value, as Spring-Gaus fixes it. The complete epoch with the lowest mean loss wins
-   (the last parameters when the budget ends before one epoch is complete).
+   log(d/m) and friction; the mass, which no video determines (docs/design.md#physical-model), stays
+   at the trivial predictor's value, as Spring-Gaus fixes it. The complete epoch with the lowest
+   mean loss wins (the last parameters when the budget ends before one epoch is complete).
 
 The starting attributes are the trivial predictor's (training medians); the asset with them on
 the same fitted geometry and velocity is returned as ``initial_guess``, so the report shows what
@@ -41,14 +41,15 @@ from ..samples import EvalSample
 from .base import FITTED_GEOMETRY, GROUND_TRUTH_GEOMETRY, Method, Prediction
 from .fitting import StaticFitSettings, cached_static_fit, photometric_loss, silhouette_centre
 
-INPUT_FRAMES = 20  # frames 0–19: what a method may see (DESIGN §3)
+INPUT_FRAMES = 20  # frames 0–19: what a method may see (docs/design.md#conventions)
 VELOCITY_FRAMES = 4  # frames 1–4 fit the initial velocity (contact happens from frame ~5 on)
 STATIC_SHARE, VELOCITY_SHARE = 0.30, 0.15  # of the budget; the dynamic stage gets the rest
 ADAM_EPS = 1e-5  # of the attribute optimiser (see _fit_attributes)
 
 
 def _observable_bounds() -> dict[str, tuple[float, float]]:
-    """Ranges of log(k/m) and log(d/m) implied by the attribute ranges of DESIGN §5."""
+    """Ranges of log(k/m) and log(d/m) implied by the attribute ranges of
+    docs/design.md#attribute-ranges."""
     m, k, d = ATTRIBUTE_RANGES["mass"], ATTRIBUTE_RANGES["stiffness"], ATTRIBUTE_RANGES["damping"]
     return {
         "log_k_over_m": (math.log(k[0] / m[1]), math.log(k[1] / m[0])),
@@ -63,7 +64,7 @@ class SpringGausSettings:
     num_anchors: int = 256  # N_A (few: tens of seconds per scene at 32 px on a CPU)
     num_neighbors: int = 32  # K
     binding_neighbors: int = 16  # n_b
-    binding_power: float = 2.0  # p_b (DESIGN §4 default; Spring-Gaus used 0.5)
+    binding_power: float = 2.0  # p_b (docs/design.md#physical-model default; Spring-Gaus used 0.5)
     min_substeps: int = 100
     velocity_iterations: int = 40
     lr_velocity: float = 0.1  # m/s and rad/s per step
@@ -223,7 +224,7 @@ class SpringGausMethod(Method):
         s = self.settings
         device = frames.device
         p = asset.physics
-        mass = p.mass  # unobservable: kept at the prior (DESIGN §4)
+        mass = p.mass  # unobservable: kept at the prior (docs/design.md#physical-model)
         bounds = _observable_bounds()
         start = [
             math.log(p.stiffness / mass),

@@ -1,9 +1,10 @@
 """``trivial``: the training set's median attributes on the true geometry — the control.
 
-Every attribute error and every image score of a model is shown beside this row (DESIGN §4,
-"Identifiability"): a model that does not beat it has learnt nothing about the physics. It uses the
-true Gaussians, anchors and initial velocity, so its image scores isolate the effect of the
-attributes; they are upper bounds for a method that must also reconstruct the geometry.
+Every attribute error and every image score of a model is shown beside this row
+(docs/design.md#identifiability): a model that does not beat it has learnt nothing about the
+physics. It uses the true Gaussians, anchors and initial velocity, so its image scores isolate the
+effect of the attributes; they are upper bounds for a method that must also reconstruct the
+geometry.
 """
 
 from __future__ import annotations
