@@ -162,7 +162,8 @@ def read_json(
     if not isinstance(data, kind):
         raise InputError(f"expected {expected}", source=source)
     if version is not None and data.get("version") != version:
-        raise InputError(f"version {data.get('version')!r} is not supported", source, "version")
+        message = f"version {data.get('version')!r} is not supported (expected {version})"
+        raise InputError(message, source, "version")
     return data
 
 

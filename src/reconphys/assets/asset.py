@@ -20,7 +20,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,8 +29,8 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from ..io import atomic_folder
-from ..physics import SpringMassModel, State, Trajectory, deform_means, rollout
+from ..io import atomic_folder, check_array, check_number, read_json, read_npz
+from ..physics import GRAVITY, SpringMassModel, State, Trajectory, deform_means, rollout
 from .gaussians import Gaussians
 from .ply import read_ply, write_ply
 
@@ -54,7 +53,7 @@ class PhysicsSettings:
     restitution: float = 0.0  # e
     frame_dt: float = 0.03  # s
     substeps: int = 100  # minimum substeps per frame; more are used when stability needs them
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.8)  # m/s²
+    gravity: tuple[float, float, float] = GRAVITY  # m/s²
     ground_height: float = 0.0  # m
     num_anchors: int = 2048  # N_A
     num_neighbors: int = 32  # K of the kNN springs
@@ -246,65 +245,8 @@ def write_asset(asset: Asset, folder: str | os.PathLike, overwrite: bool = False
 # reading and validation
 
 
-def _load_npz(path: Path) -> dict[str, np.ndarray]:
-    if not path.is_file():
-        raise InputError("file not found", source=str(path))
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise InputError(f"not a readable .npz file ({e})", source=str(path)) from None
-
-
-def _array(data: dict, path: Path, name: str, kind: str, shape: tuple) -> np.ndarray:
-    """Fetch ``name`` and check its dtype kind ('f' float, 'i' integer) and shape (None = any)."""
-    if name not in data:
-        raise InputError("missing", source=str(path), field=name)
-    a = data[name]
-    ok_kind = a.dtype.kind == "f" if kind == "f" else a.dtype.kind in "iu"
-    if not ok_kind:
-        expected = "floating point" if kind == "f" else "integer"
-        raise InputError(f"dtype {a.dtype}, expected {expected}", source=str(path), field=name)
-    if a.ndim != len(shape) or any(
-        s is not None and s != n for s, n in zip(shape, a.shape, strict=False)
-    ):
-        want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
-        raise InputError(f"shape {list(a.shape)}, expected {want}", source=str(path), field=name)
-    if kind == "f" and not np.isfinite(a).all():
-        raise InputError("contains NaN or inf", source=str(path), field=name)
-    return a
-
-
-def _number(physics: dict, path: Path, name: str, low=-math.inf, high=math.inf, integer=False):
-    if name not in physics:
-        raise InputError("missing", source=str(path), field=name)
-    value = physics[name]
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"expected a number, got {value!r}", source=str(path), field=name)
-    if integer and int(value) != value:
-        raise InputError(f"expected an integer, got {value!r}", source=str(path), field=name)
-    if not (math.isfinite(value) and low <= value <= high):
-        raise InputError(f"{value!r} is outside [{low}, {high}]", source=str(path), field=name)
-    return int(value) if integer else float(value)
-
-
 def _read_physics(path: Path) -> PhysicsSettings:
-    if not path.is_file():
-        raise InputError("file not found", source=str(path))
-    try:
-        physics = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise InputError(f"not valid JSON ({e})", source=str(path)) from None
-    if not isinstance(physics, dict):
-        raise InputError("expected a JSON object", source=str(path))
-    if physics.get("format") != FORMAT:
-        raise InputError(f"expected {FORMAT!r}", source=str(path), field="format")
-    if physics.get("version") != VERSION:
-        raise InputError(
-            f"version {physics.get('version')!r} is not supported (expected {VERSION})",
-            source=str(path),
-            field="version",
-        )
+    physics = read_json(path, format=FORMAT, version=VERSION)
     gravity = physics.get("gravity")
     if not (
         isinstance(gravity, list)
@@ -314,20 +256,20 @@ def _read_physics(path: Path) -> PhysicsSettings:
         raise InputError("expected a list of 3 finite numbers", source=str(path), field="gravity")
     tiny = 1e-12
     return PhysicsSettings(
-        mass=_number(physics, path, "mass", tiny),
-        stiffness=_number(physics, path, "stiffness", 0.0),
-        damping=_number(physics, path, "damping", 0.0),
-        friction=_number(physics, path, "friction", 0.0),
-        spring_exponent=_number(physics, path, "spring_exponent", 0.0, 10.0),
-        restitution=_number(physics, path, "restitution", 0.0, 1.0),
-        frame_dt=_number(physics, path, "frame_dt", tiny),
-        substeps=_number(physics, path, "substeps", 1, 1_000_000, integer=True),
+        mass=check_number(physics, path, "mass", tiny),
+        stiffness=check_number(physics, path, "stiffness", 0.0),
+        damping=check_number(physics, path, "damping", 0.0),
+        friction=check_number(physics, path, "friction", 0.0),
+        spring_exponent=check_number(physics, path, "spring_exponent", 0.0, 10.0),
+        restitution=check_number(physics, path, "restitution", 0.0, 1.0),
+        frame_dt=check_number(physics, path, "frame_dt", tiny),
+        substeps=check_number(physics, path, "substeps", 1, 1_000_000, integer=True),
         gravity=tuple(float(g) for g in gravity),
-        ground_height=_number(physics, path, "ground_height"),
-        num_anchors=_number(physics, path, "num_anchors", 2, integer=True),
-        num_neighbors=_number(physics, path, "num_neighbors", 1, integer=True),
-        binding_neighbors=_number(physics, path, "binding_neighbors", 1, integer=True),
-        binding_power=_number(physics, path, "binding_power", 0.0),
+        ground_height=check_number(physics, path, "ground_height"),
+        num_anchors=check_number(physics, path, "num_anchors", 2, integer=True),
+        num_neighbors=check_number(physics, path, "num_neighbors", 1, integer=True),
+        binding_neighbors=check_number(physics, path, "binding_neighbors", 1, integer=True),
+        binding_power=check_number(physics, path, "binding_power", 0.0),
         object_id=str(physics.get("object_id", "")),
     )
 
@@ -341,22 +283,22 @@ def read_asset(folder: str | os.PathLike) -> Asset:
     gaussians = read_ply(folder / "gaussians.ply")
 
     path = folder / "anchors.npz"
-    data = _load_npz(path)
-    x0 = _array(data, path, "x0", "f", (None, 3))
+    data = read_npz(path)
+    x0 = check_array(data, path, "x0", "f", (None, 3))
     n_a = x0.shape[0]
-    v0 = _array(data, path, "v0", "f", (n_a, 3))
-    springs = _array(data, path, "springs", "i", (None, 2))
-    rest_length = _array(data, path, "rest_length", "f", (springs.shape[0],))
+    v0 = check_array(data, path, "v0", "f", (n_a, 3))
+    springs = check_array(data, path, "springs", "i", (None, 2))
+    rest_length = check_array(data, path, "rest_length", "f", (springs.shape[0],))
     per_element = {}
     for name in PER_ANCHOR_ARRAYS + PER_SPRING_ARRAYS:
         if name in data:
             size = n_a if name in PER_ANCHOR_ARRAYS else springs.shape[0]
-            per_element[name] = torch.from_numpy(_array(data, path, name, "f", (size,)).copy())
+            per_element[name] = torch.from_numpy(check_array(data, path, name, "f", (size,)).copy())
 
     path = folder / "binding.npz"
-    data = _load_npz(path)
-    index = _array(data, path, "index", "i", (gaussians.num_gaussians, None))
-    weight = _array(data, path, "weight", "f", index.shape)
+    data = read_npz(path)
+    index = check_array(data, path, "index", "i", (gaussians.num_gaussians, None))
+    weight = check_array(data, path, "weight", "f", index.shape)
 
     asset = Asset(
         gaussians=gaussians,
