@@ -76,3 +76,26 @@ def test_parallel_result_does_not_depend_on_the_thread_count(monkeypatch):
     assert torch.equal(results[0], results[1])
     reference = rollout(model, State(x0, v0), 3, substeps=5, method="autograd")
     torch.testing.assert_close(results[0], reference.x, rtol=0, atol=1e-12)
+
+
+def test_every_cached_kernel_has_its_own_cache_entry():
+    """Numba's on-disk cache keys a kernel by its function's name and line, not its compile
+    options: the parallel and serial builds of the substep must not share an entry, or whichever
+    a process compiles first (a small, serial simulation) is what later processes load for the
+    parallel path too. Checked for every cached kernel of the simulator and the renderer."""
+    from numba.core.registry import CPUDispatcher
+
+    from reconphys.physics import anchors
+    from reconphys.physics import numba_backend as physics_kernels
+    from reconphys.render import numba_backend as render_kernels
+
+    kernels = {
+        f"{module.__name__}.{name}": value
+        for module in (physics_kernels, render_kernels, anchors)
+        for name, value in vars(module).items()
+        if isinstance(value, CPUDispatcher) and value._cache is not None
+    }
+    names = [k._cache._cache_file._index_name for k in kernels.values()]
+    assert len(set(names)) == len(names), dict(zip(kernels, names, strict=True))
+    assert physics_kernels._frame_parallel.targetoptions["parallel"] is True
+    assert not physics_kernels._frame_serial.targetoptions.get("parallel", False)

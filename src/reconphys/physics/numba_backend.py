@@ -15,6 +15,8 @@ the PyTorch reference; ``benchmarks/bench_simulator.py`` measures both in one ru
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import torch
 from torch import Tensor
@@ -119,10 +121,20 @@ def _frame_py(x, v, springs, rest, k, d, mass, friction, external, params, subst
                 v[b, n, 2] = vf2
 
 
+def _renamed(fn, name: str):
+    """A copy of ``fn`` under another name. Numba's on-disk cache keys a compiled function by its
+    qualified name and line, not by its compile options: two builds of one function (parallel and
+    serial) would share one cache entry, and whichever a process compiled first would be what
+    every later process loads for both (a serial kernel on the parallel path)."""
+    copy = types.FunctionType(fn.__code__, fn.__globals__, name, fn.__defaults__, fn.__closure__)
+    copy.__qualname__ = name
+    return copy
+
+
 if numba is not None:
     # One function, compiled twice: threads pay off only when there is enough work per substep.
-    _frame_parallel = numba.njit(parallel=True, cache=True)(_frame_py)
-    _frame_serial = numba.njit(parallel=False, cache=True)(_frame_py)
+    _frame_parallel = numba.njit(parallel=True, cache=True)(_renamed(_frame_py, "_frame_parallel"))
+    _frame_serial = numba.njit(parallel=False, cache=True)(_renamed(_frame_py, "_frame_serial"))
 
 # Springs × scenes per substep below which the serial version is faster (thread wake-up costs
 # more than it saves); measured on the 2-core CI machine, see docs/benchmarks.md.
