@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from test_physics_adjoint import small_system
+from test_physics_adjoint import F64, small_system, trajectories
 
 from reconphys._optional import numba_available
 from reconphys.physics import SpringMassModel, State, rollout
@@ -50,11 +50,63 @@ def test_compiled_substeps_take_a_control_force():
     assert (compiled.x - free.x).abs().max() > 1e-3  # the force did something
 
 
-def test_numba_refuses_gradients():
+@pytest.mark.parametrize(
+    "exponent, restitution, per_scene", [(0.5, 0.0, False), (0.0, 0.5, False), (0.3, 0.3, True)]
+)
+def test_compiled_backward_matches_the_torch_adjoint(exponent, restitution, per_scene):
+    """The compiled VJP (contact, free update, springs) against the hand-written torch one, which
+    test_physics_adjoint checks against autograd: every input's gradient, float64."""
+    system = small_system(per_scene_topology=per_scene)
+    reference, grads_ref = trajectories("adjoint", *system, exponent, restitution)
+    compiled, grads = trajectories("numba", *system, exponent, restitution)
+    assert (reference.x[..., 2] <= 1e-12).any(), "the window must include ground contact"
+    torch.testing.assert_close(compiled.x, reference.x, rtol=0, atol=1e-13)
+    for name, expected in grads_ref.items():
+        assert grads[name].shape == expected.shape, name
+        assert expected.abs().max() > 0, name
+        error = (grads[name] - expected).abs().max() / expected.abs().max()
+        assert error < 1e-12, f"{name}: relative error {error:.2e}"
+
+
+def test_compiled_backward_gradcheck_with_contact():
+    springs, rest, x0, v0, attributes = small_system(num_anchors=10, batch=1)
+
+    def run(v0, mass, stiffness, damping, friction, rest):
+        model = SpringMassModel(springs, rest, mass, stiffness, damping, friction, dtype=F64)
+        traj = rollout(model, State(x0, v0), 2, substeps=3, method="numba")
+        return traj.x[:, -1], traj.v[:, -1]
+
+    inputs = [v0, *attributes.values(), rest]
+    inputs = [t.clone().requires_grad_(True) for t in inputs]
+    assert torch.autograd.gradcheck(run, inputs, eps=1e-7, atol=1e-6, rtol=1e-5)
+
+
+def test_compiled_backward_in_float32_and_with_broadcast_attributes():
+    """x0 [1, N, 3] shared by 3 attribute sets, scalar stiffness/friction, rest [E], float32."""
+    springs, rest, x0, v0, _ = small_system(batch=1)
+    attributes = {
+        "mass": torch.tensor([0.5, 1.0, 2.0]),
+        "stiffness": torch.tensor(80.0),
+        "damping": torch.tensor([0.5, 1.0, 2.0]),
+        "friction": torch.tensor(0.4),
+    }
+    system = (springs, rest.float(), x0.float(), v0.float(), attributes)
+    reference, grads_ref = trajectories("adjoint", *system)
+    compiled, grads = trajectories("numba", *system)
+    assert compiled.x.shape[0] == 3 and compiled.x.dtype == torch.float32
+    for name, expected in grads_ref.items():
+        assert grads[name].shape == expected.shape and grads[name].dtype == torch.float32, name
+        error = (grads[name] - expected).abs().max() / expected.abs().max()
+        assert error < 1e-4, f"{name}: relative error {error:.2e}"
+
+
+def test_numba_refuses_a_control_force_with_gradients():
     springs, rest, x0, v0, attributes = small_system(batch=1)
     model = SpringMassModel(springs, rest, **attributes, dtype=torch.float64)
-    with pytest.raises(ValueError, match="without gradients"):
-        rollout(model, State(x0, v0.requires_grad_(True)), 1, substeps=2, method="numba")
+    control = Control(force=torch.zeros_like(x0))
+    with pytest.raises(ValueError, match="only without gradients"):
+        state = State(x0, v0.requires_grad_(True))
+        rollout(model, state, 1, substeps=2, control=control, method="numba")
 
 
 def test_parallel_result_does_not_depend_on_the_thread_count(monkeypatch):
@@ -89,13 +141,17 @@ def test_every_cached_kernel_has_its_own_cache_entry():
     from reconphys.physics import numba_backend as physics_kernels
     from reconphys.render import numba_backend as render_kernels
 
+    namespaces = [vars(m) for m in (physics_kernels, render_kernels, anchors)]
+    namespaces += [vars(physics_kernels.PARALLEL), vars(physics_kernels.SERIAL)]
     kernels = {
-        f"{module.__name__}.{name}": value
-        for module in (physics_kernels, render_kernels, anchors)
-        for name, value in vars(module).items()
+        f"{id(namespace)}.{name}": value
+        for namespace in namespaces
+        for name, value in namespace.items()
         if isinstance(value, CPUDispatcher) and value._cache is not None
     }
+    assert len(kernels) >= 16
     names = [k._cache._cache_file._index_name for k in kernels.values()]
     assert len(set(names)) == len(names), dict(zip(kernels, names, strict=True))
-    assert physics_kernels._frame_parallel.targetoptions["parallel"] is True
-    assert not physics_kernels._frame_serial.targetoptions.get("parallel", False)
+    for name in physics_kernels._KERNELS:
+        assert getattr(physics_kernels.PARALLEL, name).targetoptions["parallel"] is True
+        assert not getattr(physics_kernels.SERIAL, name).targetoptions.get("parallel", False)

@@ -54,8 +54,7 @@ class AdjointRollout(torch.autograd.Function):
             label = f"simulate ({substeps} substeps/frame)"
             frame_range = tqdm(frame_range, desc=label, unit="frame")
         for _ in frame_range:
-            for _ in range(substeps):
-                x, v = engine.step(x, v)
+            x, v = engine.run(x, v, substeps)
             xs.append(x)
             vs.append(v)
         xs, vs = torch.stack(xs, 1), torch.stack(vs, 1)
@@ -72,11 +71,7 @@ class AdjointRollout(torch.autograd.Function):
         grad_x = grad_xs[:, num_frames].contiguous()
         grad_v = grad_vs[:, num_frames].contiguous()
         for frame in reversed(range(num_frames)):
-            states = [(xs[:, frame], vs[:, frame])]
-            for _ in range(substeps - 1):
-                states.append(engine.step(*states[-1]))
-            for x, v in reversed(states):
-                grad_x, grad_v = engine.vjp(x, v, grad_x, grad_v)
+            grad_x, grad_v = engine.frame_vjp(xs[:, frame], vs[:, frame], substeps, grad_x, grad_v)
             grad_x = grad_x + grad_xs[:, frame]
             grad_v = grad_v + grad_vs[:, frame]
         totals = engine.attribute_grads()

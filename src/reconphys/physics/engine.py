@@ -9,10 +9,12 @@ external force held over it. Engines hold no simulation state between calls.
   device and dtype, differentiable by autograd) and its hand-written VJP.
 - :class:`reconphys.physics.triton_backend.TritonEngine`: fused Triton kernels of the same step and
   VJP (CUDA; no external force).
-- :class:`reconphys.physics.numba_backend.NumbaEngine`: compiled CPU substeps, forward only.
+- :class:`reconphys.physics.numba_backend.NumbaEngine`: compiled CPU substeps and VJP.
 
 :class:`BackwardEngine` adds the substep VJP that :mod:`reconphys.physics.adjoint` needs for its
-engine-generic exact backward. :func:`reconphys.physics.rollout.rollout` picks the engine.
+engine-generic exact backward, and :meth:`BackwardEngine.frame_vjp`, a frame of them (recompute
+the frame's substeps from its start state, then their VJPs in reverse), which an engine may do in
+one call (Numba does). :func:`reconphys.physics.rollout.rollout` picks the engine.
 """
 
 from __future__ import annotations
@@ -68,6 +70,23 @@ class BackwardEngine(Engine, Protocol):
     ) -> tuple[Tensor, Tensor]:  # dL/dx, dL/dv [B, N_A, 3] before the substep
         """dL/d(x, v) before the substep; attribute gradients are accumulated in the engine."""
         ...
+
+    def frame_vjp(
+        self,
+        x: Tensor,  # [B, N_A, 3] positions at the start of the frame, metres
+        v: Tensor,  # [B, N_A, 3] velocities at the start of the frame, m/s
+        substeps: int,
+        grad_x: Tensor,  # [B, N_A, 3] dL/dx after ``substeps`` substeps
+        grad_v: Tensor,  # [B, N_A, 3] dL/dv after them
+    ) -> tuple[Tensor, Tensor]:  # dL/dx, dL/dv [B, N_A, 3] at the start
+        """VJP of ``substeps`` substeps from (x, v): recompute their start states, then
+        :meth:`vjp` from the last to the first. Memory: ``substeps`` states."""
+        states = [(x, v)]
+        for _ in range(substeps - 1):
+            states.append(self.step(*states[-1]))
+        for x, v in reversed(states):
+            grad_x, grad_v = self.vjp(x, v, grad_x, grad_v)
+        return grad_x, grad_v
 
     def attribute_grads(self) -> dict[str, Tensor]:
         """Per-element gradients summed over every VJP so far: mass/friction [B, N_A],

@@ -1,16 +1,27 @@
-"""The Numba engine: compiled CPU substeps, the forward-only fast twin of ``reference.step``.
+"""The Numba engine: compiled CPU substeps and their exact VJP, the fast twin of the PyTorch engine.
 
-The viewer, the demo and ``simulate`` run long forward rollouts on CPUs, where the plain PyTorch
-step spends most of its time in per-op dispatch and temporaries (~15 tensors of [B, E, 3] per
-substep). Here a whole frame of substeps runs inside one compiled function: springs are split
-into one chunk per thread, each thread accumulates its forces into its own buffer (no atomics),
-then anchors are integrated in parallel. Same equations as
-:func:`reconphys.physics.reference.step` (same clamps and ground contact); results differ from it by
-float round-off (summation order).
+Training, refinement, the viewer and ``simulate`` spend their time in rollouts on CPUs, where the
+plain PyTorch step spends most of its time in per-op dispatch and temporaries. Here whole frames of
+substeps (and, backwards, whole frames of substep VJPs) run inside compiled functions.
 
-No autograd: ``rollout`` uses this path only when no gradient is needed (``method="auto"`` on CPU
-with gradients off, or ``method="numba"``). ``tests/test_physics_numba_backend.py`` compares it with
-the PyTorch reference; ``benchmarks/bench_simulator.py`` measures both in one run.
+Layout (built once per engine): each scene's springs are sorted by their first anchor, so the
+springs leaving anchor n are one contiguous row (``row_start``), and a second index lists the
+springs arriving at n (``in_start``/``in_spring``). A substep is two parallel passes with no atomics
+and no per-thread force buffers:
+
+1. one task per spring: its pull ``magnitude · u`` (the force on its first anchor), written to
+   ``pull [B, E, 3]``;
+2. one task per anchor: gather the pulls of its row (+) and of its incoming springs (−), then the
+   semi-implicit Euler update and ground contact, in place.
+
+The VJP of a substep is four such passes (pulls; contact and free update backwards per anchor;
+spring backwards per spring; gather of the spring gradients per anchor). Every anchor sums its
+terms in a fixed order, so results do not depend on the thread count or the machine; they differ
+from the PyTorch reference (:func:`reconphys.physics.reference.step`,
+:func:`reconphys.physics.torch_backend.substep_vjp`) by float round-off only (summation order).
+
+``tests/test_physics_numba_backend.py`` compares both directions with the PyTorch engine;
+``benchmarks/bench_simulator.py`` and ``benchmarks/bench_vs_warp.py`` measure them.
 """
 
 from __future__ import annotations
@@ -22,7 +33,7 @@ import torch
 from torch import Tensor
 
 from .._optional import numba_available
-from .engine import Engine
+from .engine import BackwardEngine
 from .model import SpringMassModel
 
 if numba_available():  # Numba is optional: the PyTorch path is used wherever it is missing.
@@ -30,128 +41,436 @@ if numba_available():  # Numba is optional: the PyTorch path is used wherever it
 else:  # pragma: no cover - depends on the machine
     numba = None
 
+# How the spring law's factor (1 + |ε|)^p is computed: the common exponents get their own branch.
+LINEAR, SQUARE_ROOT, POWER = 0, 1, 2
 
-def _frame_py(x, v, springs, rest, k, d, mass, friction, external, params, substeps, buffers):
-    """Advance x, v [B, N, 3] in place by ``substeps`` substeps.
 
-    springs [B, E, 2] int64, rest/k/d [B, E], mass/friction [B, N], external [B, N, 3] force
-    (N) held over the substeps, params = (p, e, g0, g1, g2, ground, h), buffers [B, T, N, 3]
-    scratch: the springs of each scene are split into T chunks, each with its own force buffer.
+def _exponent_mode(p: float) -> int:
+    return LINEAR if p == 0.0 else SQUARE_ROOT if p == 0.5 else POWER
+
+
+# Springs gathered at a time into small local arrays, so that their maths vectorises (SIMD).
+BLOCK = 128
+
+
+def _spring_pulls_py(x, v, topology, spring_params, params, mode, chunks, pull):
+    """pull[b, 3s:3s+3] = magnitude · u of every spring s: the force on its first anchor (N).
+
+    x, v [B, 3N] (flat xyz); topology = (3·first, 3·second [B, E] uint32, row_start,
+    in_start [B, N+1] int64, 3·in_spring [B, E] uint32); spring_params [B, 5, E] = (rest, k, d,
+    1/rest, d/rest); params = (p, e, g0, g1, g2, ground, h, 1, 1e-24, 0, 1e-30) in the model's
+    dtype (a Python literal would be float64); pull [B, 3E] out.
     """
-    p, e, g0, g1, g2, ground, h = (
-        params[0], params[1], params[2], params[3], params[4], params[5], params[6],
-    )  # fmt: skip
-    batch, num_anchors = x.shape[0], x.shape[1]
-    num_springs = springs.shape[1]
-    chunks = buffers.shape[1]
-    chunk = (num_springs + chunks - 1) // chunks
-    for _ in range(substeps):
-        for task in numba.prange(batch * chunks):
-            b = task // chunks
-            c = task % chunks
-            buf = buffers[b, c]
-            buf[:] = 0.0
-            for s in range(c * chunk, min(num_springs, (c + 1) * chunk)):
-                i = springs[b, s, 0]
-                j = springs[b, s, 1]
-                dx0 = x[b, j, 0] - x[b, i, 0]
-                dx1 = x[b, j, 1] - x[b, i, 1]
-                dx2 = x[b, j, 2] - x[b, i, 2]
-                length = np.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2 + 1e-24)
-                u0 = dx0 / length
-                u1 = dx1 / length
-                u2 = dx2 / length
-                r = rest[b, s]
-                strain = length / r - 1.0
-                magnitude = k[b, s] * strain
-                if p == 0.5:
-                    magnitude *= np.sqrt(1.0 + abs(strain))
-                elif p != 0.0:
-                    magnitude *= (1.0 + abs(strain)) ** p
-                closing = (
-                    (v[b, j, 0] - v[b, i, 0]) * u0
-                    + (v[b, j, 1] - v[b, i, 1]) * u1
-                    + (v[b, j, 2] - v[b, i, 2]) * u2
-                )
-                magnitude += d[b, s] / r * closing
-                f0 = magnitude * u0
-                f1 = magnitude * u1
-                f2 = magnitude * u2
-                buf[i, 0] += f0
-                buf[i, 1] += f1
-                buf[i, 2] += f2
-                buf[j, 0] -= f0
-                buf[j, 1] -= f1
-                buf[j, 2] -= f2
-        for task in numba.prange(batch * num_anchors):
-            b = task // num_anchors
-            n = task % num_anchors
-            f0 = external[b, n, 0]
-            f1 = external[b, n, 1]
-            f2 = external[b, n, 2]
-            for c in range(chunks):
-                f0 += buffers[b, c, n, 0]
-                f1 += buffers[b, c, n, 1]
-                f2 += buffers[b, c, n, 2]
+    first3, second3 = topology[0], topology[1]
+    p, one, tiny = params[0], params[7], params[8]
+    batch, num_springs = first3.shape
+    size = (num_springs + chunks - 1) // chunks
+    for task in numba.prange(batch * chunks):
+        b = task // chunks
+        lo = (task % chunks) * size
+        hi = min(num_springs, lo + size)
+        xb, vb, out, i3, j3 = x[b], v[b], pull[b], first3[b], second3[b]
+        k, inv_rest, d_over_rest = spring_params[b, 1], spring_params[b, 3], spring_params[b, 4]
+        dx0, dx1, dx2 = np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype)
+        dv0, dv1, dv2 = np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype)
+        for start in range(lo, hi, BLOCK):
+            count = min(hi - start, BLOCK)
+            for t in range(count):
+                i = i3[start + t]
+                j = j3[start + t]
+                dx0[t] = xb[j] - xb[i]
+                dx1[t] = xb[j + 1] - xb[i + 1]
+                dx2[t] = xb[j + 2] - xb[i + 2]
+                dv0[t] = vb[j] - vb[i]
+                dv1[t] = vb[j + 1] - vb[i + 1]
+                dv2[t] = vb[j + 2] - vb[i + 2]
+            for t in range(count):
+                s = start + t
+                length = np.sqrt(dx0[t] * dx0[t] + dx1[t] * dx1[t] + dx2[t] * dx2[t] + tiny)
+                inverse = one / length
+                strain = length * inv_rest[s] - one
+                magnitude = k[s] * strain
+                if mode == 1:
+                    magnitude *= np.sqrt(one + abs(strain))
+                elif mode == 2:
+                    magnitude *= (one + abs(strain)) ** p
+                closing = (dv0[t] * dx0[t] + dv1[t] * dx1[t] + dv2[t] * dx2[t]) * inverse
+                scale = (magnitude + d_over_rest[s] * closing) * inverse
+                dx0[t] *= scale
+                dx1[t] *= scale
+                dx2[t] *= scale
+            for t in range(count):
+                s3 = 3 * (start + t)
+                out[s3] = dx0[t]
+                out[s3 + 1] = dx1[t]
+                out[s3 + 2] = dx2[t]
+
+
+def _advance_anchors_py(x, v, topology, mass, friction, external, params, chunks, pull):
+    """Sum the pulls on each anchor, then the free update and ground contact, in place.
+
+    mass/friction [B, N], external [B, 3N] force held over the substep (newtons).
+    """
+    row_start, in_start, in3 = topology[2], topology[3], topology[4]
+    e, g0, g1, g2, ground, h = params[1], params[2], params[3], params[4], params[5], params[6]
+    one, zero, floor = params[7], params[9], params[10]
+    batch, num_anchors = mass.shape
+    size = (num_anchors + chunks - 1) // chunks
+    for task in numba.prange(batch * chunks):
+        b = task // chunks
+        lo = (task % chunks) * size
+        xb, vb, fb, pb = x[b], v[b], external[b], pull[b]
+        rows, ins, incoming = row_start[b], in_start[b], in3[b]
+        for n in range(lo, min(num_anchors, lo + size)):
+            n3 = 3 * n
+            f0 = fb[n3]
+            f1 = fb[n3 + 1]
+            f2 = fb[n3 + 2]
+            for s3 in range(3 * rows[n], 3 * rows[n + 1], 3):
+                f0 += pb[s3]
+                f1 += pb[s3 + 1]
+                f2 += pb[s3 + 2]
+            for t in range(ins[n], ins[n + 1]):
+                s3 = incoming[t]
+                f0 -= pb[s3]
+                f1 -= pb[s3 + 1]
+                f2 -= pb[s3 + 2]
             m = mass[b, n]
-            vf0 = v[b, n, 0] + (f0 / m + g0) * h
-            vf1 = v[b, n, 1] + (f1 / m + g1) * h
-            vf2 = v[b, n, 2] + (f2 / m + g2) * h
-            xf0 = x[b, n, 0] + vf0 * h
-            xf1 = x[b, n, 1] + vf1 * h
-            xf2 = x[b, n, 2] + vf2 * h
+            vf0 = vb[n3] + (f0 / m + g0) * h
+            vf1 = vb[n3 + 1] + (f1 / m + g1) * h
+            vf2 = vb[n3 + 2] + (f2 / m + g2) * h
+            xf0 = xb[n3] + vf0 * h
+            xf1 = xb[n3 + 1] + vf1 * h
+            xf2 = xb[n3 + 2] + vf2 * h
             if xf2 < ground:
-                approach = min(vf2, 0.0)
-                speed = np.sqrt(vf0 * vf0 + vf1 * vf1 + 1e-30)
-                retained = max(1.0 + friction[b, n] * ((1.0 + e) * approach) / speed, 0.0)
+                approach = min(vf2, zero)
+                speed = np.sqrt(vf0 * vf0 + vf1 * vf1 + floor)
+                retained = max(one + friction[b, n] * ((one + e) * approach) / speed, zero)
                 vt0 = vf0 * retained
                 vt1 = vf1 * retained
-                x[b, n, 0] = xf0 - h * (vf0 - vt0)
-                x[b, n, 1] = xf1 - h * (vf1 - vt1)
-                x[b, n, 2] = ground
-                v[b, n, 0] = vt0
-                v[b, n, 1] = vt1
-                v[b, n, 2] = vf2 - (1.0 + e) * approach
+                xb[n3] = xf0 - h * (vf0 - vt0)
+                xb[n3 + 1] = xf1 - h * (vf1 - vt1)
+                xb[n3 + 2] = ground
+                vb[n3] = vt0
+                vb[n3 + 1] = vt1
+                vb[n3 + 2] = vf2 - (one + e) * approach
             else:
-                x[b, n, 0] = xf0
-                x[b, n, 1] = xf1
-                x[b, n, 2] = xf2
-                v[b, n, 0] = vf0
-                v[b, n, 1] = vf1
-                v[b, n, 2] = vf2
+                xb[n3] = xf0
+                xb[n3 + 1] = xf1
+                xb[n3 + 2] = xf2
+                vb[n3] = vf0
+                vb[n3 + 1] = vf1
+                vb[n3 + 2] = vf2
 
 
-def _renamed(fn, name: str):
-    """A copy of ``fn`` under another name. Numba's on-disk cache keys a compiled function by its
-    qualified name and line, not by its compile options: two builds of one function (parallel and
-    serial) would share one cache entry, and whichever a process compiled first would be what
-    every later process loads for both (a serial kernel on the parallel path)."""
-    copy = types.FunctionType(fn.__code__, fn.__globals__, name, fn.__defaults__, fn.__closure__)
+def _frame_py(x, v, topology, spring_params, mass, friction, external, params, mode, substeps,
+              chunks, pull):  # fmt: skip
+    """Advance x, v [B, 3N] in place by ``substeps`` substeps."""
+    for _ in range(substeps):
+        _spring_pulls(x, v, topology, spring_params, params, mode, chunks, pull)
+        _advance_anchors(x, v, topology, mass, friction, external, params, chunks, pull)
+
+
+def _contact_vjp_py(x, v, topology, mass, friction, params, chunks, pull, grad_x, grad_v,
+                    grad_force, grad_mass, grad_friction):  # fmt: skip
+    """Backwards through ground contact and the free update of every anchor.
+
+    grad_x, grad_v [B, 3N]: dL/d(x', v') after the substep in, dL/d(x, v) of the direct paths
+    (x' ← x + h v_free, v_free ← v + …) out, in place; grad_force [B, 3N] dL/dF out;
+    grad_mass, grad_friction [B, N] accumulated.
+    """
+    row_start, in_start, in3 = topology[2], topology[3], topology[4]
+    e, g0, g1, g2, ground, h = params[1], params[2], params[3], params[4], params[5], params[6]
+    one, zero, floor = params[7], params[9], params[10]
+    batch, num_anchors = mass.shape
+    size = (num_anchors + chunks - 1) // chunks
+    for task in numba.prange(batch * chunks):
+        b = task // chunks
+        lo = (task % chunks) * size
+        xb, vb, pb, gxb, gvb, gfb = x[b], v[b], pull[b], grad_x[b], grad_v[b], grad_force[b]
+        rows, ins, incoming = row_start[b], in_start[b], in3[b]
+        for n in range(lo, min(num_anchors, lo + size)):
+            n3 = 3 * n
+            f0 = zero
+            f1 = zero
+            f2 = zero
+            for s3 in range(3 * rows[n], 3 * rows[n + 1], 3):
+                f0 += pb[s3]
+                f1 += pb[s3 + 1]
+                f2 += pb[s3 + 2]
+            for t in range(ins[n], ins[n + 1]):
+                s3 = incoming[t]
+                f0 -= pb[s3]
+                f1 -= pb[s3 + 1]
+                f2 -= pb[s3 + 2]
+            m = mass[b, n]
+            vf0 = vb[n3] + (f0 / m + g0) * h
+            vf1 = vb[n3 + 1] + (f1 / m + g1) * h
+            vf2 = vb[n3 + 2] + (f2 / m + g2) * h
+            gx0 = gxb[n3]
+            gx1 = gxb[n3 + 1]
+            gx2 = gxb[n3 + 2]
+            gv0 = gvb[n3]
+            gv1 = gvb[n3 + 1]
+            gv2 = gvb[n3 + 2]
+            if xb[n3 + 2] + vf2 * h < ground:
+                fr = friction[b, n]
+                approach = min(vf2, zero)
+                speed = np.sqrt(vf0 * vf0 + vf1 * vf1 + floor)
+                coefficient = (one + e) * approach
+                raw = one + fr * coefficient / speed
+                retained = max(raw, zero)
+                gn0 = gv0 + h * gx0  # dL/d(v_t') through v' and x'
+                gn1 = gv1 + h * gx1
+                gt0 = retained * gn0 - h * gx0
+                gt1 = retained * gn1 - h * gx1
+                graw = vf0 * gn0 + vf1 * gn1 if raw >= zero else zero
+                grad_friction[b, n] += graw * coefficient / speed
+                gapproach = graw * fr * (one + e) / speed - (one + e) * gv2
+                gspeed = -graw * fr * coefficient / (speed * speed)
+                gt0 += gspeed / speed * vf0
+                gt1 += gspeed / speed * vf1
+                gn = gv2 + (gapproach if vf2 <= zero else zero)
+                gxf2 = zero
+            else:
+                gt0 = gv0
+                gt1 = gv1
+                gn = gv2
+                gxf2 = gx2
+            gvf0 = gt0 + h * gx0
+            gvf1 = gt1 + h * gx1
+            gvf2 = gn + h * gxf2
+            scale = h / m
+            gfb[n3] = gvf0 * scale
+            gfb[n3 + 1] = gvf1 * scale
+            gfb[n3 + 2] = gvf2 * scale
+            grad_mass[b, n] -= (gvf0 * f0 + gvf1 * f1 + gvf2 * f2) * scale / m
+            gxb[n3 + 2] = gxf2
+            gvb[n3] = gvf0
+            gvb[n3 + 1] = gvf1
+            gvb[n3 + 2] = gvf2
+
+
+def _spring_vjp_py(x, v, topology, spring_params, params, mode, chunks, grad_force, grad_delta,
+                   grad_springs):  # fmt: skip
+    """Backwards through every spring's pull, given dL/dF of its anchors.
+
+    grad_delta [B, 6E] out: dL/d(x_j − x_i), dL/d(v_j − v_i) of each spring; grad_springs
+    [B, 3, E] accumulated: dL/d(k, d, rest).
+    """
+    first3, second3 = topology[0], topology[1]
+    p, one, tiny = params[0], params[7], params[8]
+    batch, num_springs = first3.shape
+    size = (num_springs + chunks - 1) // chunks
+    for task in numba.prange(batch * chunks):
+        b = task // chunks
+        lo = (task % chunks) * size
+        hi = min(num_springs, lo + size)
+        xb, vb, gfb, out, i3, j3 = x[b], v[b], grad_force[b], grad_delta[b], first3[b], second3[b]
+        k, d = spring_params[b, 1], spring_params[b, 2]
+        inv_rest, d_over_rest = spring_params[b, 3], spring_params[b, 4]
+        grad_k, grad_d, grad_rest = grad_springs[b, 0], grad_springs[b, 1], grad_springs[b, 2]
+        gathered = np.empty((9, BLOCK), x.dtype)
+        dx0, dx1, dx2 = gathered[0], gathered[1], gathered[2]
+        dv0, dv1, dv2 = gathered[3], gathered[4], gathered[5]
+        w0, w1, w2 = gathered[6], gathered[7], gathered[8]
+        for start in range(lo, hi, BLOCK):
+            count = min(hi - start, BLOCK)
+            for t in range(count):
+                i = i3[start + t]
+                j = j3[start + t]
+                dx0[t] = xb[j] - xb[i]
+                dx1[t] = xb[j + 1] - xb[i + 1]
+                dx2[t] = xb[j + 2] - xb[i + 2]
+                dv0[t] = vb[j] - vb[i]
+                dv1[t] = vb[j + 1] - vb[i + 1]
+                dv2[t] = vb[j + 2] - vb[i + 2]
+                w0[t] = gfb[i] - gfb[j]
+                w1[t] = gfb[i + 1] - gfb[j + 1]
+                w2[t] = gfb[i + 2] - gfb[j + 2]
+            for t in range(count):
+                s = start + t
+                length = np.sqrt(dx0[t] * dx0[t] + dx1[t] * dx1[t] + dx2[t] * dx2[t] + tiny)
+                inverse = one / length
+                u0 = dx0[t] * inverse
+                u1 = dx1[t] * inverse
+                u2 = dx2[t] * inverse
+                strain = length * inv_rest[s] - one
+                a = abs(strain)
+                if mode == 0:
+                    phi = one
+                    slope = k[s]
+                elif mode == 1:
+                    phi = np.sqrt(one + a)
+                    slope = k[s] * (one + a + p * a) / phi
+                else:
+                    phi = (one + a) ** p
+                    slope = k[s] * phi / (one + a) * (one + a + p * a)
+                closing = dv0[t] * u0 + dv1[t] * u1 + dv2[t] * u2
+                magnitude = k[s] * strain * phi + d_over_rest[s] * closing
+                gmag = w0[t] * u0 + w1[t] * u1 + w2[t] * u2
+                gstrain = gmag * slope
+                gclosing = gmag * d_over_rest[s]
+                grad_k[s] += gmag * strain * phi
+                grad_d[s] += gmag * closing * inv_rest[s]
+                grad_rest[s] -= (gmag * d[s] * closing + gstrain * length) * (
+                    inv_rest[s] * inv_rest[s]
+                )
+                gu0 = magnitude * w0[t] + gclosing * dv0[t]
+                gu1 = magnitude * w1[t] + gclosing * dv1[t]
+                gu2 = magnitude * w2[t] + gclosing * dv2[t]
+                radial = u0 * gu0 + u1 * gu1 + u2 * gu2
+                glength = gstrain * inv_rest[s]
+                dx0[t] = (gu0 - u0 * radial) * inverse + glength * u0
+                dx1[t] = (gu1 - u1 * radial) * inverse + glength * u1
+                dx2[t] = (gu2 - u2 * radial) * inverse + glength * u2
+                dv0[t] = gclosing * u0
+                dv1[t] = gclosing * u1
+                dv2[t] = gclosing * u2
+            for t in range(count):
+                s6 = 6 * (start + t)
+                out[s6] = dx0[t]
+                out[s6 + 1] = dx1[t]
+                out[s6 + 2] = dx2[t]
+                out[s6 + 3] = dv0[t]
+                out[s6 + 4] = dv1[t]
+                out[s6 + 5] = dv2[t]
+
+
+def _gather_vjp_py(topology, chunks, grad_delta, grad_x, grad_v):
+    """grad_x/grad_v [B, 3N] += the spring gradients of each anchor (+ arriving, − leaving)."""
+    row_start, in_start, in3 = topology[2], topology[3], topology[4]
+    batch, num_anchors = row_start.shape[0], row_start.shape[1] - 1
+    size = (num_anchors + chunks - 1) // chunks
+    for task in numba.prange(batch * chunks):
+        b = task // chunks
+        lo = (task % chunks) * size
+        gd, gxb, gvb = grad_delta[b], grad_x[b], grad_v[b]
+        rows, ins, incoming = row_start[b], in_start[b], in3[b]
+        for n in range(lo, min(num_anchors, lo + size)):
+            n3 = 3 * n
+            gx0 = gxb[n3]
+            gx1 = gxb[n3 + 1]
+            gx2 = gxb[n3 + 2]
+            gv0 = gvb[n3]
+            gv1 = gvb[n3 + 1]
+            gv2 = gvb[n3 + 2]
+            for s6 in range(6 * rows[n], 6 * rows[n + 1], 6):
+                gx0 -= gd[s6]
+                gx1 -= gd[s6 + 1]
+                gx2 -= gd[s6 + 2]
+                gv0 -= gd[s6 + 3]
+                gv1 -= gd[s6 + 4]
+                gv2 -= gd[s6 + 5]
+            for t in range(ins[n], ins[n + 1]):
+                s6 = 2 * incoming[t]
+                gx0 += gd[s6]
+                gx1 += gd[s6 + 1]
+                gx2 += gd[s6 + 2]
+                gv0 += gd[s6 + 3]
+                gv1 += gd[s6 + 4]
+                gv2 += gd[s6 + 5]
+            gxb[n3] = gx0
+            gxb[n3 + 1] = gx1
+            gxb[n3 + 2] = gx2
+            gvb[n3] = gv0
+            gvb[n3 + 1] = gv1
+            gvb[n3 + 2] = gv2
+
+
+def _frame_vjp_py(x, v, topology, spring_params, mass, friction, params, mode, substeps, chunks,
+                  pull, states, grad_x, grad_v, grad_force, grad_delta, grad_mass, grad_friction,
+                  grad_springs):  # fmt: skip
+    """dL/d(x, v) at the start of a frame from dL/d(x, v) at its end, in place in grad_x/grad_v.
+
+    x, v [B, 3N]: the frame's start state (not modified); states [S, 2, B, 3N] scratch for the
+    recomputed substep start states; attribute gradients accumulated.
+    """
+    no_force = np.zeros_like(x)
+    states[0, 0] = x
+    states[0, 1] = v
+    for s in range(1, substeps):
+        states[s] = states[s - 1]
+        _frame(states[s, 0], states[s, 1], topology, spring_params, mass, friction, no_force,
+               params, mode, 1, chunks, pull)  # fmt: skip
+    for s in range(substeps - 1, -1, -1):
+        xs = states[s, 0]
+        vs = states[s, 1]
+        _spring_pulls(xs, vs, topology, spring_params, params, mode, chunks, pull)
+        _contact_vjp(xs, vs, topology, mass, friction, params, chunks, pull, grad_x, grad_v,
+                     grad_force, grad_mass, grad_friction)  # fmt: skip
+        _spring_vjp(xs, vs, topology, spring_params, params, mode, chunks, grad_force,
+                    grad_delta, grad_springs)  # fmt: skip
+        _gather_vjp(topology, chunks, grad_delta, grad_x, grad_v)
+
+
+def _renamed(fn, name: str, namespace: dict | None = None):
+    """A copy of ``fn`` under another name (and, optionally, with other globals). Numba's on-disk
+    cache keys a compiled function by its qualified name and line, not by its compile options: two
+    builds of one function (parallel and serial) would share one cache entry, and whichever a
+    process compiled first would be what every later process loads for both (a serial kernel on
+    the parallel path)."""
+    globals_ = fn.__globals__ if namespace is None else namespace
+    copy = types.FunctionType(fn.__code__, globals_, name, fn.__defaults__, fn.__closure__)
     copy.__qualname__ = name
     return copy
 
 
-if numba is not None:
-    # One function, compiled twice: threads pay off only when there is enough work per substep.
-    _frame_parallel = numba.njit(parallel=True, cache=True)(_renamed(_frame_py, "_frame_parallel"))
-    _frame_serial = numba.njit(parallel=False, cache=True)(_renamed(_frame_py, "_frame_serial"))
+# Kernels with a parallel loop, then the drivers that call them (no parallel loop of their own).
+_KERNELS = ("_spring_pulls", "_advance_anchors", "_contact_vjp", "_spring_vjp", "_gather_vjp")
+_DRIVERS = ("_frame", "_frame_vjp")
 
-# Springs × scenes per substep below which the serial version is faster (thread wake-up costs
-# more than it saves); measured on the 2-core CI machine, see docs/benchmarks.md.
+
+def _build(parallel: bool) -> types.SimpleNamespace:
+    """Every kernel compiled with or without threads; each driver calls its own variant's kernels.
+
+    ``error_model="numpy"``: a division by zero gives inf/nan instead of raising, which is what
+    lets LLVM vectorise the loops (Python's check is a branch per division)."""
+    suffix = "parallel" if parallel else "serial"
+    namespace = dict(globals())
+    for name in _KERNELS + _DRIVERS:  # names resolve in ``namespace`` when first compiled
+        fn = _renamed(globals()[f"{name}_py"], f"{name}_{suffix}", namespace)
+        threads = parallel and name in _KERNELS
+        namespace[name] = numba.njit(parallel=threads, cache=True, error_model="numpy")(fn)
+    return types.SimpleNamespace(**{name: namespace[name] for name in _KERNELS + _DRIVERS})
+
+
+if numba is not None:
+    # Threads pay off only when there is enough work per substep.
+    PARALLEL, SERIAL = _build(parallel=True), _build(parallel=False)
+
+# Springs × scenes per substep below which the serial build is faster (thread wake-up costs more
+# than it saves); measured on the 2-core CI machine, see docs/benchmarks.md.
 PARALLEL_MIN_SPRINGS = 16_384
-# Spring chunks per scene in the parallel version. Fixed (not the thread count) so that the force
-# summation order, and hence the result to the last bit, does not depend on the machine.
-PARALLEL_CHUNKS = 4
 
 
 def _array(t: Tensor, shape: tuple[int, ...], dtype) -> np.ndarray:
     return np.ascontiguousarray(np.broadcast_to(t.detach().cpu().numpy().astype(dtype), shape))
 
 
-class NumbaEngine(Engine):
-    """Substeps with :func:`_frame_py` compiled by Numba (CPU, float32 or float64, no gradient).
+def _topology(springs: np.ndarray, num_anchors: int):
+    """Sort one scene's springs [E, 2] by first anchor; the leaving rows and the arriving lists.
 
-    Computes in the model's dtype; :meth:`run` does all its substeps in one compiled call.
+    Returns (order [E]: sorted → model's spring index, 3·first, 3·second [E] uint32, row_start,
+    in_start [N+1] int64, 3·in_spring [E] uint32): flat xyz offsets, unsigned so that Numba skips
+    its negative-index wrap-around.
+    """
+    order = np.argsort(springs[:, 0], kind="stable")
+    first, second = springs[order, 0], springs[order, 1]
+    row_start = np.zeros(num_anchors + 1, np.int64)
+    np.cumsum(np.bincount(first, minlength=num_anchors), out=row_start[1:])
+    in_spring = np.argsort(second, kind="stable")
+    in_start = np.zeros(num_anchors + 1, np.int64)
+    np.cumsum(np.bincount(second, minlength=num_anchors), out=in_start[1:])
+    offsets = [(3 * a).astype(np.uint32) for a in (first, second, in_spring)]
+    return order, offsets[0], offsets[1], row_start, in_start, offsets[2]
+
+
+class NumbaEngine(BackwardEngine):
+    """Substeps and substep VJPs compiled by Numba (CPU, float32 or float64).
+
+    Computes in the model's dtype; :meth:`run` does a frame's substeps in one compiled call and
+    :meth:`frame_vjp` walks a frame backwards in one compiled call.
     """
 
     def __init__(self, model: SpringMassModel, dt: float, batch: int, num_anchors: int):
@@ -160,24 +479,45 @@ class NumbaEngine(Engine):
         num_springs = model.num_springs
         dtype = np.float64 if model.dtype == torch.float64 else np.float32
         self.dtype, self.dt = dtype, dt
+        self.batch, self.num_anchors, self.num_springs = batch, num_anchors, num_springs
         springs = model.springs if model.springs.dim() == 3 else model.springs[None]
-        self.springs = _array(springs, (batch, num_springs, 2), np.int64)
+        springs = springs.detach().cpu().numpy().astype(np.int64)
+        scenes = [_topology(s, num_anchors) for s in springs]  # one per distinct topology
+        scenes = [scenes[b % len(scenes)] for b in range(batch)]
+        self.order = np.stack([scene[0] for scene in scenes])  # [B, E] sorted → model's order
+        self.topology = tuple(np.stack([scene[n] for scene in scenes]) for n in range(1, 6))
         rest = model.rest_length if model.rest_length.dim() == 2 else model.rest_length[None]
-        self.rest = _array(rest, (batch, num_springs), dtype)
-        self.k = _array(model.stiffness, (batch, num_springs), dtype)
-        self.d = _array(model.damping, (batch, num_springs), dtype)
+        rest, k, d = (
+            np.take_along_axis(_array(t, (batch, num_springs), np.float64), self.order, 1)
+            for t in (rest, model.stiffness, model.damping)
+        )
+        self.spring_params = np.ascontiguousarray(
+            np.stack([rest, k, d, 1.0 / rest, d / rest], 1).astype(dtype)
+        )  # [B, 5, E]
         self.mass = _array(model.mass, (batch, num_anchors), dtype)
         self.friction = _array(model.friction, (batch, num_anchors), dtype)
-        gravity = model.gravity
         self.params = np.array(
-            [model.spring_exponent, model.restitution, *gravity, model.ground_height, dt],
+            [model.spring_exponent, model.restitution, *model.gravity, model.ground_height, dt]
+            + [1.0, 1e-24, 0.0, 1e-30],  # constants in the model's dtype (a literal is float64)
             dtype=dtype,
         )
+        self.mode = _exponent_mode(model.spring_exponent)
         parallel = batch * num_springs >= PARALLEL_MIN_SPRINGS
-        chunks = PARALLEL_CHUNKS if parallel else 1
-        self.kernel = _frame_parallel if parallel else _frame_serial
-        self.buffers = np.zeros((batch, chunks, num_anchors, 3), dtype=dtype)
-        self.no_force = np.zeros((batch, num_anchors, 3), dtype=dtype)
+        self.kernels = PARALLEL if parallel else SERIAL
+        # Tasks per scene: enough for every thread when the batch is small. The result does not
+        # depend on it (each spring and each anchor is one task with a fixed summation order).
+        self.chunks = max(1, -(-numba.get_num_threads() // batch)) if parallel else 1
+        self.pull = np.zeros((batch, 3 * num_springs), dtype=dtype)
+        self.no_force = np.zeros((batch, 3 * num_anchors), dtype=dtype)
+        self.grads: dict[str, np.ndarray] | None = None
+
+    def _flat(self, t: Tensor, copy: bool = True) -> np.ndarray:
+        """[B, N, 3] tensor → a C-contiguous [B, 3N] array in the engine's dtype."""
+        a = t.detach().cpu().numpy().reshape(self.batch, 3 * self.num_anchors)
+        return np.array(a, dtype=self.dtype, copy=True if copy else None, order="C")
+
+    def _tensor(self, a: np.ndarray) -> Tensor:
+        return torch.from_numpy(a.reshape(self.batch, self.num_anchors, 3))
 
     def step(self, x: Tensor, v: Tensor, force: Tensor | None = None) -> tuple[Tensor, Tensor]:
         return self.run(x, v, 1, force)
@@ -186,11 +526,55 @@ class NumbaEngine(Engine):
         self, x: Tensor, v: Tensor, substeps: int, force: Tensor | None = None
     ) -> tuple[Tensor, Tensor]:
         """``substeps`` substeps in one compiled call; returns new CPU tensors (model dtype)."""
-        x = x.detach().cpu().numpy().astype(self.dtype, copy=True)
-        v = v.detach().cpu().numpy().astype(self.dtype, copy=True)
-        external = self.no_force if force is None else _array(force, x.shape, self.dtype)
-        self.kernel(
-            x, v, self.springs, self.rest, self.k, self.d, self.mass, self.friction,
-            external, self.params, substeps, self.buffers,
+        x, v = self._flat(x), self._flat(v)
+        if force is None:
+            external = self.no_force
+        else:
+            external = self._flat(force.expand(self.batch, self.num_anchors, 3), copy=False)
+        self.kernels._frame(
+            x, v, self.topology, self.spring_params, self.mass, self.friction, external,
+            self.params, self.mode, substeps, self.chunks, self.pull,
         )  # fmt: skip
-        return torch.from_numpy(x), torch.from_numpy(v)
+        return self._tensor(x), self._tensor(v)
+
+    def vjp(self, x: Tensor, v: Tensor, grad_x: Tensor, grad_v: Tensor) -> tuple[Tensor, Tensor]:
+        return self.frame_vjp(x, v, 1, grad_x, grad_v)
+
+    def frame_vjp(
+        self, x: Tensor, v: Tensor, substeps: int, grad_x: Tensor, grad_v: Tensor
+    ) -> tuple[Tensor, Tensor]:
+        """dL/d(x, v) at the start of ``substeps`` substeps from x, v, given dL/d(x, v) after them;
+        attribute gradients are accumulated (:meth:`attribute_grads`)."""
+        x, v = self._flat(x, copy=False), self._flat(v, copy=False)
+        grad_x, grad_v = self._flat(grad_x), self._flat(grad_v)
+        batch, anchors3, springs = self.batch, 3 * self.num_anchors, self.num_springs
+        if self.grads is None:
+            self.grads = {
+                "mass": np.zeros((batch, self.num_anchors), self.dtype),
+                "friction": np.zeros((batch, self.num_anchors), self.dtype),
+                "springs": np.zeros((batch, 3, springs), self.dtype),
+                "force": np.zeros((batch, anchors3), self.dtype),
+                "delta": np.zeros((batch, 6 * springs), self.dtype),
+            }
+        states = np.empty((substeps, 2, batch, anchors3), self.dtype)
+        g = self.grads
+        self.kernels._frame_vjp(
+            x, v, self.topology, self.spring_params, self.mass, self.friction, self.params,
+            self.mode, substeps, self.chunks, self.pull, states, grad_x, grad_v, g["force"],
+            g["delta"], g["mass"], g["friction"], g["springs"],
+        )  # fmt: skip
+        return self._tensor(grad_x), self._tensor(grad_v)
+
+    def attribute_grads(self) -> dict[str, Tensor]:
+        """Per-element gradients summed over every VJP so far: mass/friction [B, N_A],
+        stiffness/damping/rest_length [B, E] (in the model's spring order)."""
+        batch, anchors, springs = self.batch, self.num_anchors, self.num_springs
+        per_anchor = np.zeros((batch, anchors), self.dtype)
+        g = self.grads or {"mass": per_anchor, "friction": per_anchor}
+        per_spring = np.zeros((batch, 3, springs), self.dtype)
+        if self.grads is not None:  # sorted → the model's spring order
+            index = np.broadcast_to(self.order[:, None], per_spring.shape)
+            np.put_along_axis(per_spring, index, g["springs"], 2)
+        out = {"mass": g["mass"], "friction": g["friction"], "stiffness": per_spring[:, 0]}
+        out |= {"damping": per_spring[:, 1], "rest_length": per_spring[:, 2]}
+        return {name: torch.from_numpy(np.ascontiguousarray(a)) for name, a in out.items()}

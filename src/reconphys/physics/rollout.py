@@ -47,9 +47,7 @@ def choose_method(
         if method not in METHODS:
             raise ValueError(f"RECONPHYS_SIMULATOR: expected one of {METHODS}, got {method!r}")
 
-    tensors = [state.x, state.v, model.rest_length, model.mass, model.stiffness]
-    tensors += [model.damping, model.friction]
-    needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
+    needs_grad = _needs_grad(model, state)
     has_control = (control is not None and control.force is not None) or control_fn is not None
     if method in ("adjoint", "fused") and has_control:
         raise ValueError(f"method {method!r} does not take a control force; use 'autograd'")
@@ -60,17 +58,25 @@ def choose_method(
     if method == "numba":
         if not numba_available():
             raise ValueError("method 'numba' needs Numba (pip install numba)")
-        if state.x.is_cuda or needs_grad:
-            raise ValueError("method 'numba' runs on CPU without gradients")
+        if state.x.is_cuda:
+            raise ValueError("method 'numba' runs on CPU")
+        if needs_grad and has_control:
+            raise ValueError("method 'numba' takes a control force only without gradients")
     if method != "auto":
         return method
-    if not state.x.is_cuda and not needs_grad and numba_available():
+    if not state.x.is_cuda and numba_available() and not (needs_grad and has_control):
         return "numba"
     if has_control:
         return "autograd"
     if state.x.is_cuda and fused_usable(state.x.device):
         return "fused"
     return "adjoint" if needs_grad else "autograd"
+
+
+def _needs_grad(model: SpringMassModel, state: State) -> bool:
+    tensors = [state.x, state.v, model.rest_length, model.mass, model.stiffness]
+    tensors += [model.damping, model.friction]
+    return torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
 
 
 @dataclass
@@ -113,10 +119,11 @@ def rollout(
       :mod:`reconphys.physics.adjoint` (memory O(frames + substeps)).
     - ``"fused"``: the Triton kernels of :mod:`reconphys.physics.triton_backend` with the same
       backward (CUDA; on CPU only under Triton's interpreter, for tests).
-    - ``"numba"``: compiled CPU substeps of :mod:`reconphys.physics.numba_backend`, forward only
-      (CPU, no gradient); takes a ``control`` or ``control_fn``.
-    - ``"auto"``: on CPU without a gradient ``"numba"`` (when Numba is installed); else
-      ``"autograd"`` with a ``control``; ``"fused"`` on CUDA when Triton is installed; else
+    - ``"numba"``: compiled CPU substeps of :mod:`reconphys.physics.numba_backend`, with the
+      same adjoint backward as ``"adjoint"`` (compiled too); takes a ``control`` or
+      ``control_fn`` when no gradient is needed.
+    - ``"auto"``: on CPU ``"numba"`` (when Numba is installed), unless a gradient and a control
+      are both asked for; else ``"autograd"`` with a ``control``; ``"fused"`` on CUDA when Triton is installed; else
       ``"adjoint"`` when a gradient is needed, else ``"autograd"``. The environment
       variable ``RECONPHYS_SIMULATOR`` (one of the names above) overrides the automatic choice,
       e.g. ``RECONPHYS_SIMULATOR=autograd`` forces the fast path off.
@@ -128,10 +135,12 @@ def rollout(
     method = choose_method(method, model, state, control, control_fn)
     batch = max(state.x.shape[0], state.v.shape[0], model.batch_size)
     state = State(state.x.expand(batch, -1, -1), state.v.expand(batch, -1, -1))
-    if method in ("adjoint", "fused"):
+    if method in ("adjoint", "fused") or (method == "numba" and _needs_grad(model, state)):
         engine = TorchEngine
         if method == "fused":  # Triton (optional) is imported only when used
             from .triton_backend import TritonEngine as engine
+        elif method == "numba":  # so is Numba
+            from .numba_backend import NumbaEngine as engine
         xs, vs = rollout_adjoint(model, state, num_frames, substeps, frame_dt, engine, progress)
         return Trajectory(xs, vs, substeps, frame_dt)
     make_engine, xs, vs = TorchEngine, [state.x], [state.v]

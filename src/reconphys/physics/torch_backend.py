@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from .engine import Engine
+from .engine import BackwardEngine
 from .model import SpringMassModel
 from .reference import gather_anchors, scatter_anchors, step
 from .state import Control, State
@@ -130,7 +130,7 @@ def substep_vjp(
     return grad_x_prev, grad_v_prev, attributes
 
 
-class TorchEngine(Engine):
+class TorchEngine(BackwardEngine):
     """Substep and substep-VJP in plain PyTorch (any device and dtype); the step is
     differentiable by autograd too (``rollout(method="autograd")``)."""
 

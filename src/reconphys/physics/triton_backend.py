@@ -25,7 +25,7 @@ import os
 import torch
 from torch import Tensor
 
-from .engine import Engine
+from .engine import BackwardEngine
 from .model import SpringMassModel
 
 try:  # Triton is optional: the PyTorch path is used wherever it is missing.
@@ -358,7 +358,7 @@ def _strided(value: Tensor, batch: int, size: int) -> tuple[Tensor, int, int]:
     return value, batch_stride, element_stride
 
 
-class TritonEngine(Engine):
+class TritonEngine(BackwardEngine):
     """Substep and substep-VJP with the Triton kernels (the interface of
     :class:`~reconphys.physics.engine.BackwardEngine`, like ``TorchEngine``; no external force).
 
