@@ -91,7 +91,7 @@ def test_compiled_backward_in_float32_and_with_broadcast_attributes():
         "friction": torch.tensor(0.4),
     }
     system = (springs, rest.float(), x0.float(), v0.float(), attributes)
-    reference, grads_ref = trajectories("adjoint", *system)
+    _, grads_ref = trajectories("adjoint", *system)
     compiled, grads = trajectories("numba", *system)
     assert compiled.x.shape[0] == 3 and compiled.x.dtype == torch.float32
     for name, expected in grads_ref.items():

@@ -163,6 +163,10 @@ def _advance_anchors_py(x, v, topology, mass, friction, external, params, chunks
                 vb[n3 + 2] = vf2
 
 
+# The drivers below call these names; :func:`_build` binds them to one variant's compiled kernels.
+_spring_pulls = _advance_anchors = _contact_vjp = _spring_vjp = _gather_vjp = _frame = None
+
+
 def _frame_py(x, v, topology, spring_params, mass, friction, external, params, mode, substeps,
               chunks, pull):  # fmt: skip
     """Advance x, v [B, 3N] in place by ``substeps`` substeps."""
@@ -497,10 +501,10 @@ class NumbaEngine(BackwardEngine):
         self.mass = _array(model.mass, (batch, num_anchors), dtype)
         self.friction = _array(model.friction, (batch, num_anchors), dtype)
         self.params = np.array(
-            [model.spring_exponent, model.restitution, *model.gravity, model.ground_height, dt]
-            + [1.0, 1e-24, 0.0, 1e-30],  # constants in the model's dtype (a literal is float64)
+            [model.spring_exponent, model.restitution, *model.gravity, model.ground_height, dt,
+             1.0, 1e-24, 0.0, 1e-30],  # constants in the model's dtype (a literal is float64)
             dtype=dtype,
-        )
+        )  # fmt: skip
         self.mode = _exponent_mode(model.spring_exponent)
         parallel = batch * num_springs >= PARALLEL_MIN_SPRINGS
         self.kernels = PARALLEL if parallel else SERIAL

@@ -123,10 +123,10 @@ def rollout(
       same adjoint backward as ``"adjoint"`` (compiled too); takes a ``control`` or
       ``control_fn`` when no gradient is needed.
     - ``"auto"``: on CPU ``"numba"`` (when Numba is installed), unless a gradient and a control
-      are both asked for; else ``"autograd"`` with a ``control``; ``"fused"`` on CUDA when Triton is installed; else
-      ``"adjoint"`` when a gradient is needed, else ``"autograd"``. The environment
-      variable ``RECONPHYS_SIMULATOR`` (one of the names above) overrides the automatic choice,
-      e.g. ``RECONPHYS_SIMULATOR=autograd`` forces the fast path off.
+      are both asked for; else ``"autograd"`` with a ``control``; ``"fused"`` on CUDA when Triton
+      is installed; else ``"adjoint"`` when a gradient is needed, else ``"autograd"``. The
+      environment variable ``RECONPHYS_SIMULATOR`` (one of the names above) overrides the
+      automatic choice, e.g. ``RECONPHYS_SIMULATOR=autograd`` forces the fast path off.
     """
     if control is not None and control_fn is not None:
         raise ValueError("give a control or a control_fn, not both")
