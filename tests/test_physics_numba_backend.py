@@ -149,7 +149,7 @@ def test_every_cached_kernel_has_its_own_cache_entry():
         for name, value in namespace.items()
         if isinstance(value, CPUDispatcher) and value._cache is not None
     }
-    assert len(kernels) >= 16
+    assert len(kernels) >= 18
     names = [k._cache._cache_file._index_name for k in kernels.values()]
     assert len(set(names)) == len(names), dict(zip(kernels, names, strict=True))
     for name in physics_kernels._KERNELS:

@@ -53,13 +53,33 @@ def _exponent_mode(p: float) -> int:
 BLOCK = 128
 
 
-def _spring_pulls_py(x, v, topology, spring_params, params, mode, chunks, pull):
+def _spring_factors_py(strain, count, p, one, mode, phi, slope_per_k):
+    """phi = (1 + |ε|)^p and dphi-slope (1 + |ε|)^(p−1) (1 + |ε| + p|ε|) for strain[:count]: the
+    spring law's non-linear factor and d(ε·phi)/dε, one branch-free loop per exponent kind."""
+    if mode == 0:
+        for t in range(count):
+            phi[t] = one
+            slope_per_k[t] = one
+    elif mode == 1:
+        for t in range(count):
+            a = abs(strain[t])
+            phi[t] = np.sqrt(one + a)
+            slope_per_k[t] = (one + a + p * a) / phi[t]
+    else:
+        for t in range(count):
+            a = abs(strain[t])
+            phi[t] = (one + a) ** p
+            slope_per_k[t] = phi[t] / (one + a) * (one + a + p * a)
+
+
+def _spring_pulls_py(x, v, topology, spring_params, params, mode, chunks, pull, blocks):
     """pull[b, 3s:3s+3] = magnitude · u of every spring s: the force on its first anchor (N).
 
     x, v [B, 3N] (flat xyz); topology = (3·first, 3·second [B, E] uint32, row_start,
     in_start [B, N+1] int64, 3·in_spring [B, E] uint32); spring_params [B, 5, E] = (rest, k, d,
     1/rest, d/rest); params = (p, e, g0, g1, g2, ground, h, 1, 1e-24, 0, 1e-30) in the model's
-    dtype (a Python literal would be float64); pull [B, 3E] out.
+    dtype (a Python literal would be float64); pull [B, 3E] out; blocks [B·chunks, ≥ 10, BLOCK]
+    scratch (allocating inside a parallel loop costs far more than the loop).
     """
     first3, second3 = topology[0], topology[1]
     p, one, tiny = params[0], params[7], params[8]
@@ -71,8 +91,10 @@ def _spring_pulls_py(x, v, topology, spring_params, params, mode, chunks, pull):
         hi = min(num_springs, lo + size)
         xb, vb, out, i3, j3 = x[b], v[b], pull[b], first3[b], second3[b]
         k, inv_rest, d_over_rest = spring_params[b, 1], spring_params[b, 3], spring_params[b, 4]
-        dx0, dx1, dx2 = np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype)
-        dv0, dv1, dv2 = np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype), np.empty(BLOCK, x.dtype)
+        scratch = blocks[task]
+        dx0, dx1, dx2 = scratch[0], scratch[1], scratch[2]
+        dv0, dv1, dv2 = scratch[3], scratch[4], scratch[5]
+        length, strain, factor, slope = scratch[6], scratch[7], scratch[8], scratch[9]
         for start in range(lo, hi, BLOCK):
             count = min(hi - start, BLOCK)
             for t in range(count):
@@ -84,16 +106,14 @@ def _spring_pulls_py(x, v, topology, spring_params, params, mode, chunks, pull):
                 dv0[t] = vb[j] - vb[i]
                 dv1[t] = vb[j + 1] - vb[i + 1]
                 dv2[t] = vb[j + 2] - vb[i + 2]
+            for t in range(count):  # branch-free loops vectorise
+                length[t] = np.sqrt(dx0[t] * dx0[t] + dx1[t] * dx1[t] + dx2[t] * dx2[t] + tiny)
+                strain[t] = length[t] * inv_rest[start + t] - one
+            _spring_factors(strain, count, p, one, mode, factor, slope)
             for t in range(count):
                 s = start + t
-                length = np.sqrt(dx0[t] * dx0[t] + dx1[t] * dx1[t] + dx2[t] * dx2[t] + tiny)
-                inverse = one / length
-                strain = length * inv_rest[s] - one
-                magnitude = k[s] * strain
-                if mode == 1:
-                    magnitude *= np.sqrt(one + abs(strain))
-                elif mode == 2:
-                    magnitude *= (one + abs(strain)) ** p
+                inverse = one / length[t]
+                magnitude = k[s] * strain[t] * factor[t]
                 closing = (dv0[t] * dx0[t] + dv1[t] * dx1[t] + dv2[t] * dx2[t]) * inverse
                 scale = (magnitude + d_over_rest[s] * closing) * inverse
                 dx0[t] *= scale
@@ -164,14 +184,15 @@ def _advance_anchors_py(x, v, topology, mass, friction, external, params, chunks
 
 
 # The drivers below call these names; :func:`_build` binds them to one variant's compiled kernels.
-_spring_pulls = _advance_anchors = _contact_vjp = _spring_vjp = _gather_vjp = _frame = None
+_spring_factors = _spring_pulls = _advance_anchors = None
+_contact_vjp = _spring_vjp = _gather_vjp = _frame = None
 
 
 def _frame_py(x, v, topology, spring_params, mass, friction, external, params, mode, substeps,
-              chunks, pull):  # fmt: skip
+              chunks, pull, blocks):  # fmt: skip
     """Advance x, v [B, 3N] in place by ``substeps`` substeps."""
     for _ in range(substeps):
-        _spring_pulls(x, v, topology, spring_params, params, mode, chunks, pull)
+        _spring_pulls(x, v, topology, spring_params, params, mode, chunks, pull, blocks)
         _advance_anchors(x, v, topology, mass, friction, external, params, chunks, pull)
 
 
@@ -256,7 +277,7 @@ def _contact_vjp_py(x, v, topology, mass, friction, params, chunks, pull, grad_x
 
 
 def _spring_vjp_py(x, v, topology, spring_params, params, mode, chunks, grad_force, grad_delta,
-                   grad_springs):  # fmt: skip
+                   grad_springs, blocks):  # fmt: skip
     """Backwards through every spring's pull, given dL/dF of its anchors.
 
     grad_delta [B, 6E] out: dL/d(x_j − x_i), dL/d(v_j − v_i) of each spring; grad_springs
@@ -274,10 +295,11 @@ def _spring_vjp_py(x, v, topology, spring_params, params, mode, chunks, grad_for
         k, d = spring_params[b, 1], spring_params[b, 2]
         inv_rest, d_over_rest = spring_params[b, 3], spring_params[b, 4]
         grad_k, grad_d, grad_rest = grad_springs[b, 0], grad_springs[b, 1], grad_springs[b, 2]
-        gathered = np.empty((9, BLOCK), x.dtype)
-        dx0, dx1, dx2 = gathered[0], gathered[1], gathered[2]
-        dv0, dv1, dv2 = gathered[3], gathered[4], gathered[5]
-        w0, w1, w2 = gathered[6], gathered[7], gathered[8]
+        scratch = blocks[task]
+        dx0, dx1, dx2 = scratch[0], scratch[1], scratch[2]
+        dv0, dv1, dv2 = scratch[3], scratch[4], scratch[5]
+        w0, w1, w2 = scratch[6], scratch[7], scratch[8]
+        length, strain, phi, slope = scratch[9], scratch[10], scratch[11], scratch[12]
         for start in range(lo, hi, BLOCK):
             count = min(hi - start, BLOCK)
             for t in range(count):
@@ -292,32 +314,24 @@ def _spring_vjp_py(x, v, topology, spring_params, params, mode, chunks, grad_for
                 w0[t] = gfb[i] - gfb[j]
                 w1[t] = gfb[i + 1] - gfb[j + 1]
                 w2[t] = gfb[i + 2] - gfb[j + 2]
+            for t in range(count):  # branch-free loops vectorise
+                length[t] = np.sqrt(dx0[t] * dx0[t] + dx1[t] * dx1[t] + dx2[t] * dx2[t] + tiny)
+                strain[t] = length[t] * inv_rest[start + t] - one
+            _spring_factors(strain, count, p, one, mode, phi, slope)
             for t in range(count):
                 s = start + t
-                length = np.sqrt(dx0[t] * dx0[t] + dx1[t] * dx1[t] + dx2[t] * dx2[t] + tiny)
-                inverse = one / length
+                inverse = one / length[t]
                 u0 = dx0[t] * inverse
                 u1 = dx1[t] * inverse
                 u2 = dx2[t] * inverse
-                strain = length * inv_rest[s] - one
-                a = abs(strain)
-                if mode == 0:
-                    phi = one
-                    slope = k[s]
-                elif mode == 1:
-                    phi = np.sqrt(one + a)
-                    slope = k[s] * (one + a + p * a) / phi
-                else:
-                    phi = (one + a) ** p
-                    slope = k[s] * phi / (one + a) * (one + a + p * a)
                 closing = dv0[t] * u0 + dv1[t] * u1 + dv2[t] * u2
-                magnitude = k[s] * strain * phi + d_over_rest[s] * closing
+                magnitude = k[s] * strain[t] * phi[t] + d_over_rest[s] * closing
                 gmag = w0[t] * u0 + w1[t] * u1 + w2[t] * u2
-                gstrain = gmag * slope
+                gstrain = gmag * k[s] * slope[t]
                 gclosing = gmag * d_over_rest[s]
-                grad_k[s] += gmag * strain * phi
+                grad_k[s] += gmag * strain[t] * phi[t]
                 grad_d[s] += gmag * closing * inv_rest[s]
-                grad_rest[s] -= (gmag * d[s] * closing + gstrain * length) * (
+                grad_rest[s] -= (gmag * d[s] * closing + gstrain * length[t]) * (
                     inv_rest[s] * inv_rest[s]
                 )
                 gu0 = magnitude * w0[t] + gclosing * dv0[t]
@@ -383,8 +397,8 @@ def _gather_vjp_py(topology, chunks, grad_delta, grad_x, grad_v):
 
 
 def _frame_vjp_py(x, v, topology, spring_params, mass, friction, params, mode, substeps, chunks,
-                  pull, states, grad_x, grad_v, grad_force, grad_delta, grad_mass, grad_friction,
-                  grad_springs):  # fmt: skip
+                  pull, blocks, states, grad_x, grad_v, grad_force, grad_delta, grad_mass,
+                  grad_friction, grad_springs):  # fmt: skip
     """dL/d(x, v) at the start of a frame from dL/d(x, v) at its end, in place in grad_x/grad_v.
 
     x, v [B, 3N]: the frame's start state (not modified); states [S, 2, B, 3N] scratch for the
@@ -396,15 +410,15 @@ def _frame_vjp_py(x, v, topology, spring_params, mass, friction, params, mode, s
     for s in range(1, substeps):
         states[s] = states[s - 1]
         _frame(states[s, 0], states[s, 1], topology, spring_params, mass, friction, no_force,
-               params, mode, 1, chunks, pull)  # fmt: skip
+               params, mode, 1, chunks, pull, blocks)  # fmt: skip
     for s in range(substeps - 1, -1, -1):
         xs = states[s, 0]
         vs = states[s, 1]
-        _spring_pulls(xs, vs, topology, spring_params, params, mode, chunks, pull)
+        _spring_pulls(xs, vs, topology, spring_params, params, mode, chunks, pull, blocks)
         _contact_vjp(xs, vs, topology, mass, friction, params, chunks, pull, grad_x, grad_v,
                      grad_force, grad_mass, grad_friction)  # fmt: skip
         _spring_vjp(xs, vs, topology, spring_params, params, mode, chunks, grad_force,
-                    grad_delta, grad_springs)  # fmt: skip
+                    grad_delta, grad_springs, blocks)  # fmt: skip
         _gather_vjp(topology, chunks, grad_delta, grad_x, grad_v)
 
 
@@ -420,7 +434,8 @@ def _renamed(fn, name: str, namespace: dict | None = None):
     return copy
 
 
-# Kernels with a parallel loop, then the drivers that call them (no parallel loop of their own).
+# Kernels with a parallel loop; the helper they call and the drivers that call them have none.
+_HELPERS = ("_spring_factors",)
 _KERNELS = ("_spring_pulls", "_advance_anchors", "_contact_vjp", "_spring_vjp", "_gather_vjp")
 _DRIVERS = ("_frame", "_frame_vjp")
 
@@ -432,11 +447,14 @@ def _build(parallel: bool) -> types.SimpleNamespace:
     lets LLVM vectorise the loops (Python's check is a branch per division)."""
     suffix = "parallel" if parallel else "serial"
     namespace = dict(globals())
-    for name in _KERNELS + _DRIVERS:  # names resolve in ``namespace`` when first compiled
+    for name in (
+        _HELPERS + _KERNELS + _DRIVERS
+    ):  # names resolve in ``namespace`` when first compiled
         fn = _renamed(globals()[f"{name}_py"], f"{name}_{suffix}", namespace)
         threads = parallel and name in _KERNELS
         namespace[name] = numba.njit(parallel=threads, cache=True, error_model="numpy")(fn)
-    return types.SimpleNamespace(**{name: namespace[name] for name in _KERNELS + _DRIVERS})
+    names = _HELPERS + _KERNELS + _DRIVERS
+    return types.SimpleNamespace(**{name: namespace[name] for name in names})
 
 
 if numba is not None:
@@ -512,6 +530,7 @@ class NumbaEngine(BackwardEngine):
         # depend on it (each spring and each anchor is one task with a fixed summation order).
         self.chunks = max(1, -(-numba.get_num_threads() // batch)) if parallel else 1
         self.pull = np.zeros((batch, 3 * num_springs), dtype=dtype)
+        self.blocks = np.zeros((batch * self.chunks, 13, BLOCK), dtype=dtype)  # per-task scratch
         self.no_force = np.zeros((batch, 3 * num_anchors), dtype=dtype)
         self.grads: dict[str, np.ndarray] | None = None
 
@@ -537,7 +556,7 @@ class NumbaEngine(BackwardEngine):
             external = self._flat(force.expand(self.batch, self.num_anchors, 3), copy=False)
         self.kernels._frame(
             x, v, self.topology, self.spring_params, self.mass, self.friction, external,
-            self.params, self.mode, substeps, self.chunks, self.pull,
+            self.params, self.mode, substeps, self.chunks, self.pull, self.blocks,
         )  # fmt: skip
         return self._tensor(x), self._tensor(v)
 
@@ -564,7 +583,7 @@ class NumbaEngine(BackwardEngine):
         g = self.grads
         self.kernels._frame_vjp(
             x, v, self.topology, self.spring_params, self.mass, self.friction, self.params,
-            self.mode, substeps, self.chunks, self.pull, states, grad_x, grad_v, g["force"],
+            self.mode, substeps, self.chunks, self.pull, self.blocks, states, grad_x, grad_v, g["force"],
             g["delta"], g["mass"], g["friction"], g["springs"],
         )  # fmt: skip
         return self._tensor(grad_x), self._tensor(grad_v)
