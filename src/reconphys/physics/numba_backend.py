@@ -583,8 +583,8 @@ class NumbaEngine(BackwardEngine):
         g = self.grads
         self.kernels._frame_vjp(
             x, v, self.topology, self.spring_params, self.mass, self.friction, self.params,
-            self.mode, substeps, self.chunks, self.pull, self.blocks, states, grad_x, grad_v, g["force"],
-            g["delta"], g["mass"], g["friction"], g["springs"],
+            self.mode, substeps, self.chunks, self.pull, self.blocks, states, grad_x, grad_v,
+            g["force"], g["delta"], g["mass"], g["friction"], g["springs"],
         )  # fmt: skip
         return self._tensor(grad_x), self._tensor(grad_v)
 
