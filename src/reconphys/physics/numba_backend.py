@@ -93,19 +93,31 @@ def _spring_pulls_py(x, v, topology, spring_params, params, mode, chunks, pull, 
         k, inv_rest, d_over_rest = spring_params[b, 1], spring_params[b, 3], spring_params[b, 4]
         scratch = blocks[task]
         dx0, dx1, dx2 = scratch[0], scratch[1], scratch[2]
-        dv0, dv1, dv2 = scratch[3], scratch[4], scratch[5]
+        dv_dx = scratch[3]
         length, strain, factor, slope = scratch[6], scratch[7], scratch[8], scratch[9]
         for start in range(lo, hi, BLOCK):
             count = min(hi - start, BLOCK)
+            last = np.uint32(4294967295)  # the row's first anchor, loaded once per row
+            xi0 = xi1 = xi2 = vi0 = vi1 = vi2 = one
             for t in range(count):
                 i = i3[start + t]
                 j = j3[start + t]
-                dx0[t] = xb[j] - xb[i]
-                dx1[t] = xb[j + 1] - xb[i + 1]
-                dx2[t] = xb[j + 2] - xb[i + 2]
-                dv0[t] = vb[j] - vb[i]
-                dv1[t] = vb[j + 1] - vb[i + 1]
-                dv2[t] = vb[j + 2] - vb[i + 2]
+                if i != last:
+                    xi0 = xb[i]
+                    xi1 = xb[i + 1]
+                    xi2 = xb[i + 2]
+                    vi0 = vb[i]
+                    vi1 = vb[i + 1]
+                    vi2 = vb[i + 2]
+                    last = i
+                d0 = xb[j] - xi0
+                d1 = xb[j + 1] - xi1
+                d2 = xb[j + 2] - xi2
+                dx0[t] = d0
+                dx1[t] = d1
+                dx2[t] = d2
+                # (v_j − v_i)·(x_j − x_i): the closing speed times the length
+                dv_dx[t] = (vb[j] - vi0) * d0 + (vb[j + 1] - vi1) * d1 + (vb[j + 2] - vi2) * d2
             for t in range(count):  # branch-free loops vectorise
                 length[t] = np.sqrt(dx0[t] * dx0[t] + dx1[t] * dx1[t] + dx2[t] * dx2[t] + tiny)
                 strain[t] = length[t] * inv_rest[start + t] - one
@@ -114,7 +126,7 @@ def _spring_pulls_py(x, v, topology, spring_params, params, mode, chunks, pull, 
                 s = start + t
                 inverse = one / length[t]
                 magnitude = k[s] * strain[t] * factor[t]
-                closing = (dv0[t] * dx0[t] + dv1[t] * dx1[t] + dv2[t] * dx2[t]) * inverse
+                closing = dv_dx[t] * inverse
                 scale = (magnitude + d_over_rest[s] * closing) * inverse
                 dx0[t] *= scale
                 dx1[t] *= scale
