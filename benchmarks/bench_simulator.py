@@ -4,8 +4,8 @@ Objects are balls of volume anchors (0.5 m across) with K-nearest-neighbour spri
 the ground with mid-range attributes. "forward" runs substeps without autograd; "fwd+bwd" runs the
 same substeps with gradients on (m, k, d, f, initial velocity) and back-propagates a loss on the
 final positions. Methods (see ``reconphys.physics.rollout``): ``autograd`` (the plain reference),
-``adjoint`` (same forward, hand-written backward), ``numba`` (compiled CPU substeps, forward
-only), ``fused`` (Triton kernels, CUDA only). The
+``adjoint`` (same forward, hand-written backward), ``numba`` (compiled CPU substeps and
+compiled adjoint), ``fused`` (Triton kernels, CUDA only). The
 forward of ``autograd`` and ``adjoint`` is the same code, so it is timed once ("torch"). One row
 per (B scenes, N_A anchors, K neighbours); substeps/s count substeps of the whole batch.
 
@@ -84,6 +84,8 @@ def run(device: str, configs, substeps: int) -> list[dict]:
             config, device, autograd_substeps, "autograd", True
         )
         row["bwd adjoint"] = substeps_per_second(config, device, substeps, "adjoint", True)
+        if device == "cpu" and numba_available():
+            row["bwd numba"] = substeps_per_second(config, device, substeps, "numba", True)
         if fused:
             row["fwd fused"] = substeps_per_second(config, device, substeps, "fused", False)
             row["bwd fused"] = substeps_per_second(config, device, substeps, "fused", True)
@@ -111,7 +113,8 @@ def main() -> None:
         print(f"{datetime.date.today()}, {substeps} substeps per timing, best of 2, float32")
         print(f"(autograd fwd+bwd timed over {AUTOGRAD_BACKWARD_SUBSTEPS[device]} substeps)")
         rows = run(device, configs, substeps)
-        names = ("fwd torch", "fwd numba", "fwd fused", "bwd autograd", "bwd adjoint", "bwd fused")
+        names = ("fwd torch", "fwd numba", "fwd fused", "bwd autograd", "bwd adjoint", "bwd numba")
+        names += ("bwd fused",)
         columns = [c for c in names if c in rows[0]]
         titles = {
             "fwd torch": "forward, torch",
@@ -119,6 +122,7 @@ def main() -> None:
             "fwd fused": "forward, fused",
             "bwd autograd": "fwd+bwd, autograd",
             "bwd adjoint": "fwd+bwd, adjoint",
+            "bwd numba": "fwd+bwd, numba",
             "bwd fused": "fwd+bwd, fused",
         }
         print("\nsubsteps/s (whole batch); ratios against the autograd reference of the same run")
