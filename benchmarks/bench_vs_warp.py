@@ -25,8 +25,9 @@ kernels take ~0.3 ms, far above the launch cost).
 Forward + backward on Warp is ``wp.Tape`` over S substeps with every substep's state (and force
 array) kept, loss = sum of the final z, gradients to k, d, mass, friction (per spring / per anchor
 arrays) and the initial velocity. Ours: forward = ``rollout(..., method="numba")`` under no_grad,
-forward + backward = ``rollout(..., method="adjoint")`` and ``traj.x[:, -1, :, 2].sum().backward()``
-as in bench_simulator.py. Our timings run in one subprocess per thread count (NUMBA_NUM_THREADS and
+forward + backward = the same with gradients on (the compiled adjoint) and
+``traj.x[:, -1, :, 2].sum().backward()`` as in bench_simulator.py. Our timings run in one
+subprocess per thread count (NUMBA_NUM_THREADS and
 torch threads set before Numba starts), Warp's in its own; rounds interleave them and the table
 keeps each one's best. Agreement (final positions, gradient sums) is checked first: the script
 exits non-zero if the positions differ by more than 1e-5 m.
@@ -343,7 +344,7 @@ def ours_functions(model, state, dt, substeps):
             return rollout(model, state, 1, frame_dt, substeps=substeps, method="numba")
 
     def forward_backward():
-        traj = rollout(model, state, 1, frame_dt, substeps=substeps, method="adjoint")
+        traj = rollout(model, state, 1, frame_dt, substeps=substeps, method="numba")
         traj.x[:, -1, :, 2].sum().backward()
         return traj
 

@@ -21,7 +21,7 @@ from the PyTorch reference (:func:`reconphys.physics.reference.step`,
 :func:`reconphys.physics.torch_backend.substep_vjp`) by float round-off only (summation order).
 
 ``tests/test_physics_numba_backend.py`` compares both directions with the PyTorch engine;
-``benchmarks/bench_simulator.py`` measures them.
+``benchmarks/bench_simulator.py`` and ``benchmarks/bench_vs_warp.py`` measure them.
 """
 
 from __future__ import annotations
