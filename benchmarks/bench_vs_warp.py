@@ -65,13 +65,28 @@ MISSING_WARP = "bench_vs_warp.py needs NVIDIA Warp (warp-lang): pip install -e '
 # ---------------------------------------------------------------------------------------------
 
 
-def system(grad: bool):
-    """bench_simulator.py's ball and the substep length our rollout would pick for 30 ms frames."""
+def system(grad: bool, renumbered: bool = False):
+    """bench_simulator.py's ball and the substep length our rollout would pick for 30 ms frames.
+
+    ``renumbered``: anchors numbered as our engine numbers them internally (reverse Cuthill–McKee
+    on the spring graph), so that Warp gets the same memory locality."""
     from bench_simulator import make_system
 
+    from reconphys.physics import SpringMassModel, State
     from reconphys.physics.stability import stable_substeps
 
     model, state, params, num_springs = make_system(*SYSTEM, "cpu", grad)
+    if renumbered:
+        import torch
+
+        from reconphys.physics.numba_backend import _anchor_order
+
+        order = torch.from_numpy(_anchor_order(model.springs.numpy(), SYSTEM[1]))
+        rank = torch.empty_like(order)
+        rank[order] = torch.arange(len(order))
+        model = SpringMassModel(rank[model.springs], model.rest_length, **params)
+        v0 = state.v.detach()[:, order].requires_grad_(grad)
+        state = State(state.x[:, order].contiguous(), v0)
     dt = FRAME_DT / stable_substeps(model, state.x.detach(), FRAME_DT)
     return model, state, params, num_springs, dt
 
@@ -355,7 +370,7 @@ def worker_ours(args) -> dict:
     from reconphys.threads import set_cpu_threads
 
     set_cpu_threads(args.threads[0])
-    model, state, _, _, dt = system(grad=True)
+    model, state, _, _, dt = system(True, args.renumbered)
     forward, forward_backward = ours_functions(model, state, dt, args.substeps)
     return {
         "forward": args.substeps / best_time(forward, args.repeats),
@@ -369,7 +384,7 @@ def worker_warp(args) -> dict:
     from reconphys.threads import set_cpu_threads
 
     set_cpu_threads(1)
-    model, state, _, _, dt = system(grad=False)
+    model, state, _, _, dt = system(False, args.renumbered)
     setting = (model, state, dt, args.substeps, args.repeats)
     result = {"cpu": warp_timings(*setting, "cpu", args.capture)}
     if wp.is_cuda_available():
@@ -386,7 +401,7 @@ def worker_check(args) -> dict:
     from reconphys.threads import set_cpu_threads
 
     set_cpu_threads(1)
-    model, state, params, num_springs, dt = system(grad=True)
+    model, state, params, num_springs, dt = system(True, args.renumbered)
     forward, forward_backward = ours_functions(model, state, dt, args.substeps)
     x_numba = forward().x[0, -1].numpy()
     traj = forward_backward()
@@ -444,6 +459,8 @@ def run_worker(kind: str, threads: int, args) -> dict:
     command += ["--repeats", str(args.repeats)]
     if not args.capture:
         command.append("--recorded")
+    if args.renumbered:
+        command.append("--renumbered")
     env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
     done = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
     lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
@@ -517,6 +534,11 @@ def main() -> None:
     parser.add_argument(
         "--recorded", dest="capture", action="store_false", help="Warp without graph capture"
     )
+    parser.add_argument(
+        "--renumbered",
+        action="store_true",
+        help="give both engines the anchors in our engine's internal order (Warp's locality too)",
+    )
     parser.add_argument("--worker", choices=sorted(WORKERS), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if importlib.util.find_spec("warp") is None:
@@ -542,7 +564,8 @@ def main() -> None:
     )
     print(
         f"1 scene, {SYSTEM[1]:,} anchors, K = {SYSTEM[2]} ({check['springs']:,} springs), float32; "
-        f"Warp CPU driven by {mode}"
+        f"Warp CPU driven by {mode}; anchors "
+        + ("renumbered (our engine's order) for both" if args.renumbered else "as generated")
     )
     ok = print_check(check, args.substeps)
 
