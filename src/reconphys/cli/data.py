@@ -36,6 +36,7 @@ SETTINGS_OPTIONS = {
     "distribution": "distribution",
     "max_horizontal_speed": "max_horizontal_speed",
     "max_angular_speed": "max_angular_speed",
+    "toss_fraction": "toss_fraction",
     "objaverse_uids": "objaverse_uids",
 }
 
@@ -64,6 +65,11 @@ def make_data(
         None, help="Initial horizontal speed bound per axis, m/s (default 0.3)."
     ),
     max_angular_speed: float = typer.Option(None, help="Initial spin bound, rad/s (default 2.0)."),
+    toss_fraction: float = typer.Option(
+        None,
+        help="Share of tosses (0.5–1.5 m/s sideways, so friction shows); the rest are drops "
+        "(default 0.5; the paper preset: 0, released from rest).",
+    ),
     seed: int = typer.Option(0, help="Dataset seed: object selection, splits, all samples."),
     workers: int = typer.Option(
         0, help="Worker processes (0: one per CPU core, one with --device cuda)."

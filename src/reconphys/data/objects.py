@@ -73,15 +73,15 @@ class Placement:
 
 
 def place(obj: CanonicalObject, spec: SampleSpec) -> Placement:
-    """Rotate the object, centre its anchors over the origin and lift them so that it first
-    touches the ground at ``spec.target_contact_time``."""
+    """Rotate the object, centre its anchors over ``spec.start`` (the origin for a drop) and lift
+    them so that it first touches the ground at ``spec.target_contact_time``."""
     anchors = obj.anchors.double().numpy()
     centroid = anchors.mean(0)
     relative = (anchors - centroid) @ spec.rotation.T
     height = centroid_height_for_contact(
         relative, spec.linear_velocity[2], spec.angular_velocity, spec.target_contact_time
     )
-    translation = np.array([0.0, 0.0, height]) - spec.rotation @ centroid
+    translation = np.array([*spec.start, height]) - spec.rotation @ centroid
     return Placement(spec.rotation, translation, float(height + relative[:, 2].min()))
 
 

@@ -8,6 +8,12 @@ Distributions (documented in docs/dataset.md; ranges from docs/design.md#attribu
 - orientation: uniform on SO(3) (a normalised 4D Gaussian as quaternion).
 - angular velocity: uniform direction, speed uniform on [0, max_angular_speed] rad/s, about the
   anchors' centroid; horizontal velocity: each axis uniform on ±max_horizontal_speed m/s.
+- launch: a **toss** with probability ``toss_fraction``, else a **drop**. A drop keeps the
+  horizontal velocity above and starts over the origin (the cameras' target). A toss replaces it
+  by a horizontal speed uniform on ``toss_speed_range`` in a uniform direction, lowered where
+  needed so that the path it would take with the sample's friction (flight, then Coulomb sliding
+  to the clip's end, :func:`toss_travel`) fits inside the views (:func:`toss_path_budget`); it
+  starts half that path before the origin, so it slides across the middle of the views.
 - first ground contact: a target time ``t_c`` uniform on ``contact_frame_range`` frames; the
   vertical velocity v_z is uniform on the part of [−max_vertical_speed, max_vertical_speed] that
   keeps the free-fall drop height ``½ g t_c² − v_z t_c`` inside ``drop_height_range``; the height
@@ -45,6 +51,8 @@ class SampleSpec:
     linear_velocity: tuple[float, float, float]  # m/s
     angular_velocity: tuple[float, float, float]  # rad/s about the anchors' centroid
     target_contact_time: float  # seconds
+    launch: str = "drop"  # "drop" or "toss"
+    start: tuple[float, float] = (0.0, 0.0)  # anchors' centroid over the ground at frame 0, m
 
     @property
     def attributes(self) -> dict[str, float]:
@@ -105,6 +113,18 @@ def draw_sample(settings: DataSettings, object_id: str, sample_index: int) -> Sa
     if v_low > v_high:  # the ranges cannot both hold: keep the height range
         v_low = v_high = (fall - min(max(fall, low), high)) / t_c
     v_z = float(rng.uniform(v_low, v_high))
+    # The launch: drawn after everything above, always in the same order (a seed's drops stay).
+    toss = bool(rng.uniform() < settings.toss_fraction)
+    heading = rng.uniform(0.0, 2.0 * math.pi)
+    speed = float(rng.uniform(*settings.toss_speed_range))
+    start = np.zeros(2)
+    if toss:
+        duration = (settings.num_frames - 1) * settings.frame_dt
+        budget = toss_path_budget(settings)
+        speed = _fitting_speed(speed, budget, friction, t_c, duration)
+        direction = np.array([math.cos(heading), math.sin(heading)])
+        horizontal = speed * direction
+        start = -0.5 * toss_travel(speed, friction, t_c, duration) * direction
     return SampleSpec(
         mass=mass,
         stiffness=stiffness,
@@ -114,7 +134,44 @@ def draw_sample(settings: DataSettings, object_id: str, sample_index: int) -> Sa
         linear_velocity=(float(horizontal[0]), float(horizontal[1]), v_z),
         angular_velocity=tuple(float(a) for a in angular),
         target_contact_time=t_c,
+        launch="toss" if toss else "drop",
+        start=(float(start[0]), float(start[1])),
     )
+
+
+def toss_path_budget(settings: DataSettings) -> float:
+    """How far (m) a tossed object's centroid may travel and stay in every view: the width of the
+    ground the camera sees around its target (the vertical field of view at the camera's
+    distance; the images are square), less the object's size, with a 10 % margin."""
+    half_width = settings.camera_radius * math.tan(math.radians(settings.camera_fov_deg) / 2)
+    return max(0.0, 0.9 * 2.0 * (half_width - 0.5 * settings.size))
+
+
+def toss_travel(speed: float, friction: float, contact_time: float, duration: float) -> float:
+    """Horizontal distance (m) a rigid body launched at ``speed`` (m/s) covers in ``duration``
+    seconds: flight until ``contact_time``, then Coulomb sliding (deceleration μg) until it stops.
+    An upper bound for our objects: the impact and their deformation only take speed away."""
+    flight = speed * min(contact_time, duration)
+    sliding_time = max(0.0, duration - contact_time)
+    deceleration = friction * GRAVITY_MAGNITUDE
+    if deceleration * sliding_time >= speed:  # stops before the clip ends
+        return flight + speed * speed / (2.0 * deceleration)
+    return flight + speed * sliding_time - 0.5 * deceleration * sliding_time**2
+
+
+def _fitting_speed(
+    speed: float, budget: float, friction: float, contact_time: float, duration: float
+) -> float:
+    """``speed``, or the largest speed whose :func:`toss_travel` fits in ``budget`` (bisection:
+    the travel grows with the speed)."""
+    if toss_travel(speed, friction, contact_time, duration) <= budget:
+        return speed
+    low, high = 0.0, speed
+    for _ in range(50):
+        middle = 0.5 * (low + high)
+        fits = toss_travel(middle, friction, contact_time, duration) <= budget
+        low, high = (middle, high) if fits else (low, middle)
+    return low
 
 
 def axis_angle_matrices(rotation_vectors: np.ndarray) -> np.ndarray:  # [T, 3] → [T, 3, 3]

@@ -53,6 +53,8 @@ class DataSettings:
     max_vertical_speed: float = 1.2  # |v_z| at frame 0, m/s
     max_horizontal_speed: float = 0.3  # per horizontal axis, m/s
     max_angular_speed: float = 2.0  # rad/s, random axis
+    toss_fraction: float = 0.5  # share of tosses (the rest are drops), see data/sampling.py
+    toss_speed_range: tuple[float, float] = (0.5, 1.5)  # horizontal speed of a toss, m/s
     camera_radius: float = 2.0  # metres from the target
     camera_fov_deg: float = 40.0  # vertical
     camera_elevation_deg: float = 15.0
@@ -113,6 +115,13 @@ class DataSettings:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InputError(f"must be a number ≥ 0, got {value!r}", field=flag)
+        if not (isinstance(self.toss_fraction, (int, float)) and 0 <= self.toss_fraction <= 1):
+            raise InputError(
+                f"must be in [0, 1], got {self.toss_fraction!r}", field="--toss-fraction"
+            )
+        low, high = self.toss_speed_range
+        if not (0 < low <= high and math.isfinite(high)):
+            raise InputError(f"[{low}, {high}] must satisfy 0 < low ≤ high", "toss_speed_range")
         for name in ("frame_dt", "size", "camera_radius", "camera_fov_deg"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -144,7 +153,7 @@ PRESETS: dict[str, DataSettings] = {
     "small": DataSettings(),
     # The paper's protocol (ReconPhys §4.1): 450 × 10 training, 46 × 2 test samples at 512²,
     # with the model defaults of docs/design.md#physical-model (N_A 2048, K 32) and 20 000 Gaussians
-    # per object.
+    # per object; drops released from rest only (drop, collision, rebound), no tosses.
     "paper": DataSettings(
         objects=450,
         test_objects=46,
@@ -153,6 +162,11 @@ PRESETS: dict[str, DataSettings] = {
         resolution=512,
         num_gaussians=20000,
         num_anchors=2048,
+        contact_frame_range=(5.0, 10.0),  # free fall from rest inside drop_height_range
+        max_vertical_speed=0.0,
+        max_horizontal_speed=0.0,
+        max_angular_speed=0.0,
+        toss_fraction=0.0,
     ),
 }
 

@@ -240,6 +240,7 @@ def write_sample(
             "initial_state": {
                 "rotation": placement.rotation.tolist(),
                 "translation": placement.translation.tolist(),
+                "launch": spec.launch,
                 "linear_velocity": list(spec.linear_velocity),
                 "angular_velocity": list(spec.angular_velocity),
                 "drop_height": placement.drop_height,
