@@ -100,7 +100,7 @@ def _capture_make_dataset(monkeypatch) -> list:
 def test_make_data_config_file_is_the_makefile_flags(monkeypatch, tmp_path):
     seen = _capture_make_dataset(monkeypatch)
     flags = ["--objects", "40", "--test-objects", "6", "--samples-per-object", "6"]
-    flags += ["--test-samples-per-object", "2", "--resolution", "32"]
+    flags += ["--test-samples-per-object", "2", "--resolution", "32", "--toss-fraction", "0"]
     for args in (flags, ["--config", str(CONFIGS / "data_small.toml")]):
         result = runner.invoke(app, ["make-data", *args, "--out", str(tmp_path / "d")])
         assert result.exit_code == 0, result.output

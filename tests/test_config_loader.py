@@ -59,7 +59,12 @@ def test_data_presets_and_config_files():
     assert make_settings("small") == PRESETS["small"]
     small = make_settings(config=CONFIGS / "data_small.toml")
     flags = make_settings(
-        objects=40, test_objects=6, samples_per_object=6, test_samples_per_object=2, resolution=32
+        objects=40,
+        test_objects=6,
+        samples_per_object=6,
+        test_samples_per_object=2,
+        resolution=32,
+        toss_fraction=0.0,
     )
     assert small == flags and small.fingerprint() == flags.fingerprint()
     # flags win over the file, the file over the preset

@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -395,3 +396,33 @@ def test_show_writes_a_contact_sheet(reference, tmp_path):
     assert image.shape[0] >= 4 * 96 and image.shape[2] == 3
     missing = runner.invoke(app, ["data", "show", str(tmp_path / "nothing")])
     assert missing.exit_code == 2 and "manifest.json" in missing.output
+
+
+def test_tossed_objects_slide_and_stay_in_view(tmp_path):
+    """DESIGN §5's toss: the object slides across the views and stays in all of them (visible in
+    every view and frame, its centroid projected inside the middle 80 % of each frame; it may
+    touch a border, as drops do when they squash near a camera), and it travels several times as
+    far as a drop. Low friction: the long slides, where aiming matters."""
+    slippery = {"resolution": 32, "test_objects": 0, "objects": 4, "friction_range": (0.0, 0.1)}
+    settings = make_settings(**{**SMALL.to_dict(), **slippery})  # long slides: the hard case
+    travel = {}
+    for fraction in (0.0, 1.0):
+        out = tmp_path / f"toss-{fraction}"
+        make_dataset(replace(settings, toss_fraction=fraction), out, device="cpu")
+        dataset = DropDataset(out, split="train")
+        moved = []
+        for index in range(len(dataset)):
+            item = dataset[index]
+            launch = dataset.meta(index)["initial_state"]["launch"]
+            assert launch == ("toss" if fraction else "drop")
+            mask = item["frames"].amax(-1) > 0.05  # [V, T, H, W]: the object on black
+            assert (mask.sum((2, 3)) > 0).all(), f"sample {index}: the object left a view"
+            centroid = item["anchors"].mean(1)  # [T, 3]
+            world_to_cam = item["world_to_cam"]  # [V, 4, 4]
+            in_camera = centroid @ world_to_cam[:, None, :3, :3].mT + world_to_cam[:, None, :3, 3]
+            projected = in_camera @ item["K"][:, None].mT  # [V, T, 3]
+            pixel = projected[..., :2] / projected[..., 2:]  # the centroid's pixel, [V, T, 2]
+            assert ((pixel > 3.2) & (pixel < 28.8)).all(), f"sample {index}: {pixel.amin()}"
+            moved.append(torch.linalg.norm(centroid[-1, :2] - centroid[0, :2]).item())
+        travel[fraction] = sum(moved) / len(moved)
+    assert travel[1.0] > 2.5 * travel[0.0], travel

@@ -7,6 +7,7 @@ import socket
 
 import numpy as np
 import pytest
+import torch
 
 from reconphys.data.plan import in_shard, parse_shard, plan_objects, plan_samples
 from reconphys.data.sampling import (
@@ -15,12 +16,16 @@ from reconphys.data.sampling import (
     contact_frame,
     draw_sample,
     random_rotation,
+    toss_path_budget,
+    toss_travel,
 )
 from reconphys.data.settings import DataSettings, make_settings
 from reconphys.data.sources import ProceduralSource
 from reconphys.data.stats import simulated_contact_frames
 from reconphys.errors import InputError
 from reconphys.physics import ATTRIBUTE_RANGES
+
+F64 = torch.float64
 
 
 @pytest.fixture(autouse=True)
@@ -60,7 +65,11 @@ def test_sampled_motion_respects_its_bounds():
     for i in range(200):
         spec = draw_sample(settings, "x", i)
         vx, vy, vz = spec.linear_velocity
-        assert abs(vx) <= settings.max_horizontal_speed and abs(vy) <= settings.max_horizontal_speed
+        if spec.launch == "drop":
+            assert max(abs(vx), abs(vy)) <= settings.max_horizontal_speed and spec.start == (0, 0)
+        else:  # a toss: at most the range's top speed, starting behind the origin
+            assert math.hypot(vx, vy) <= settings.toss_speed_range[1] + 1e-12
+            assert vx * spec.start[0] + vy * spec.start[1] < 0
         assert abs(vz) <= settings.max_vertical_speed + 1e-12
         assert np.linalg.norm(spec.angular_velocity) <= settings.max_angular_speed
         t_c = spec.target_contact_time / settings.frame_dt
@@ -71,6 +80,52 @@ def test_sampled_motion_respects_its_bounds():
         rotation = spec.rotation
         assert np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
         assert np.linalg.det(rotation) == pytest.approx(1.0)
+
+
+def test_launches_mix_drops_and_tosses_and_the_paper_preset_releases_from_rest():
+    settings = DataSettings()
+    specs = [draw_sample(settings, f"obj-{i}", j) for i in range(100) for j in range(4)]
+    tosses = [s for s in specs if s.launch == "toss"]
+    assert 0.42 < len(tosses) / len(specs) < 0.58  # about half each (DESIGN §5)
+    speeds = np.array([math.hypot(*s.linear_velocity[:2]) for s in tosses])
+    low, high = settings.toss_speed_range
+    assert speeds.max() <= high + 1e-12 and np.median(speeds) > low  # lowered only to fit the view
+    budget = toss_path_budget(settings)
+    duration = (settings.num_frames - 1) * settings.frame_dt
+    for s, speed in zip(tosses, speeds, strict=True):
+        travel = toss_travel(speed, s.friction, s.target_contact_time, duration)
+        assert travel <= budget + 1e-9
+        assert math.hypot(*s.start) == pytest.approx(travel / 2)  # the path centred on the origin
+    paper = make_settings("paper")
+    for i in range(50):
+        s = draw_sample(paper, "obj", i)
+        assert s.launch == "drop" and s.linear_velocity == (0, 0, 0) and s.start == (0, 0)
+        assert not np.any(s.angular_velocity)
+        fall = 0.5 * 9.8 * s.target_contact_time**2
+        assert paper.drop_height_range[0] <= fall <= paper.drop_height_range[1]
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.3])
+def test_toss_travel_against_the_simulator(friction):
+    """A stiff cube tossed sideways: with no friction its centroid covers exactly
+    :func:`toss_travel`'s distance; with friction, at most that (the bound the aim relies on)."""
+    from reconphys.physics import SpringMassModel, State, knn_springs, rollout
+
+    grid = torch.stack(torch.meshgrid(*[torch.linspace(-0.05, 0.05, 3)] * 3, indexing="ij"), -1)
+    anchors = grid.reshape(-1, 3).double()
+    springs, rest = knn_springs(anchors, 8)
+    contact_time, duration, speed, frame_dt = 0.3, 0.87, 1.0, 0.03
+    x0 = anchors + torch.tensor([0.0, 0.0, 0.05 + 0.5 * 9.8 * contact_time**2], dtype=F64)
+    v0 = torch.zeros_like(x0) + torch.tensor([speed, 0.0, 0.0], dtype=F64)
+    model = SpringMassModel(springs, rest, 0.05, 1000.0, 1.0, friction, dtype=F64)
+    frames = round(duration / frame_dt)
+    traj = rollout(model, State(x0[None], v0[None]), frames, frame_dt, method="autograd")
+    moved = (traj.x[0, -1, :, 0].mean() - traj.x[0, 0, :, 0].mean()).item()
+    bound = toss_travel(speed, friction, contact_time, frames * frame_dt)
+    if friction == 0.0:
+        assert moved == pytest.approx(bound, rel=1e-3)
+    else:
+        assert 0.3 * bound < moved <= bound
 
 
 def test_random_rotations_are_uniform_on_average():

@@ -116,6 +116,26 @@ def test_pybullet_source():
     assert g.num_gaussians == 200
 
 
+def test_pybullet_source_leaves_out_broken_meshes(tmp_path, monkeypatch):
+    """pybullet's wheel ships random_urdfs/168/168.obj as the single line "v nan": the source
+    must not list it (a plan drawing it killed a 1,360-sample run at its 229th object)."""
+    import sys
+    import types
+
+    from reconphys.data import sources
+
+    trimesh.creation.box(extents=(0.4, 0.3, 0.2)).export(tmp_path / "good.obj")
+    (tmp_path / "bad.obj").write_text("v nan\n")
+    fake = types.SimpleNamespace(getDataPath=lambda: str(tmp_path))
+    monkeypatch.setitem(sys.modules, "pybullet_data", fake)
+    monkeypatch.setattr(
+        sources, "pybullet_mesh_paths", lambda: [tmp_path / "bad.obj", tmp_path / "good.obj"]
+    )
+    with pytest.warns(UserWarning, match=r"left out 1 unusable meshes: bad\.obj"):
+        source = sources.PybulletSource()
+    assert [ref.id for ref in source.candidates(1)] == ["good.obj"]
+
+
 def _write_mirror(root, uids_with_files, uids_without_files):
     root.mkdir(parents=True)
     paths = {}

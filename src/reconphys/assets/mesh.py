@@ -59,6 +59,7 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise InputError(message, source=str(path)) from e
     if not isinstance(mesh, trimesh.Trimesh):
         raise InputError("file holds no triangle mesh", source=str(path))
+    _validate(mesh, str(path))
     return mesh
 
 

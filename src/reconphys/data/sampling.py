@@ -154,7 +154,7 @@ def toss_travel(speed: float, friction: float, contact_time: float, duration: fl
     flight = speed * min(contact_time, duration)
     sliding_time = max(0.0, duration - contact_time)
     deceleration = friction * GRAVITY_MAGNITUDE
-    if deceleration * sliding_time >= speed:  # stops before the clip ends
+    if deceleration > 0 and deceleration * sliding_time >= speed:  # stops before the end
         return flight + speed * speed / (2.0 * deceleration)
     return flight + speed * sliding_time - 0.5 * deceleration * sliding_time**2
 

@@ -11,13 +11,14 @@ dataset seed, so an object looks the same in every dataset that draws it.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from ..assets.gaussians import Gaussians
-from ..assets.mesh import MESH_SUFFIXES, pybullet_mesh_paths
+from ..assets.mesh import MESH_SUFFIXES, load_mesh, pybullet_mesh_paths
 from ..assets.normalize import normalize_gaussians
 from ..assets.procedural import SHAPES, make_procedural_gaussians
 from ..errors import InputError
@@ -91,11 +92,25 @@ class PybulletSource(FolderSource):
     """The ~1000 visual meshes shipped in the ``pybullet`` wheel (optional extra ``meshes``)."""
 
     def __init__(self):
-        self.paths = pybullet_mesh_paths()  # InputError with the install hint when missing
+        paths = pybullet_mesh_paths()  # InputError with the install hint when missing
         import pybullet_data
 
         self.root = Path(pybullet_data.getDataPath())
         self.name = "pybullet"
+        # The wheel holds broken files (random_urdfs/168/168.obj is one line, "v nan"): they are
+        # left out of the candidates, so a plan never draws them (~4 s to check all ~1000).
+        self.paths, broken = [], []
+        for path in paths:
+            try:
+                load_mesh(path)
+                self.paths.append(path)
+            except InputError as e:
+                broken.append(f"{path.relative_to(self.root).as_posix()} ({e})")
+        if broken:
+            listed = "; ".join(broken)
+            warnings.warn(
+                f"pybullet: left out {len(broken)} unusable meshes: {listed}", stacklevel=2
+            )
 
     def candidates(self, count: int) -> list[ObjectRef]:
         return [ObjectRef(p.relative_to(self.root).as_posix(), str(p)) for p in self.paths]
