@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from reconphys.physics import SpringMassModel, State, rollout, stable_substeps
-from reconphys.physics.stability import largest_eigenvalue
+from reconphys.physics.stability import largest_eigenvalue, stability_rates
 
 
 def dense_stiffness(points: torch.Tensor, springs: torch.Tensor, rest: torch.Tensor) -> np.ndarray:
@@ -50,3 +50,23 @@ def test_stability_bound_is_stable_and_not_wasteful(ball_anchors, m, k, d):
     assert not (torch.isfinite(unstable.x).all() and unstable.x.abs().max() < 1.0), (
         "a quarter of the bound should already blow up: the bound would be too conservative"
     )
+
+
+def test_one_object_with_many_attribute_sets_matches_scene_by_scene(ball_anchors):
+    """A batch of one object under several (k/m, d/m) — refinement's candidates — computes the
+    unit eigenvalue once; the bounds equal those of each scene alone (and of a moved copy)."""
+    anchors, springs, rest = ball_anchors
+    k = torch.tensor([10.0, 300.0, 1200.0])
+    d = torch.tensor([5.0, 0.1, 1.0])
+    m = torch.tensor([0.2, 1.0, 6.0])
+    x = anchors[None].expand(3, -1, -1).float()
+    batch = stability_rates(SpringMassModel(springs, rest, m, k, d, 0.5), x)
+    alone = [
+        stability_rates(SpringMassModel(springs, rest, m[b : b + 1], k[b], d[b], 0.5), x[:1])
+        for b in range(3)
+    ]
+    assert batch == pytest.approx((max(a[0] for a in alone), max(a[1] for a in alone)), rel=1e-6)
+    moved = x.clone()
+    moved[1] *= 0.5  # a different shape: springs twice as stiff per metre, not deduplicated
+    rates = stability_rates(SpringMassModel(springs, rest, m, k, d, 0.5), moved)
+    assert rates[0] > batch[0]

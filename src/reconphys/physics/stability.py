@@ -78,7 +78,10 @@ def stability_rates(
     scalar = all(t.shape[1] == 1 for t in (model.mass, model.stiffness, model.damping))
     if scalar:
         one = torch.ones(1, 1, dtype=x.dtype, device=x.device)
-        unit = largest_eigenvalue(model, x, one, one)  # [B] shared topology → one value per x
+        shared = model.springs.dim() == 2 and model.rest_length.dim() == 1
+        if shared and x.shape[0] > 1 and bool((x == x[:1]).all()):  # one object, many attributes
+            x = x[:1]  # (refinement, searches): the unit eigenvalue is computed once
+        unit = largest_eigenvalue(model, x, one, one)  # [B|1] shared topology: one value per x
         omega_sq = unit * (model.stiffness / model.mass).abs()[:, 0]
         damping_rate = unit * (model.damping / model.mass).abs()[:, 0]
     else:
