@@ -399,10 +399,10 @@ def test_show_writes_a_contact_sheet(reference, tmp_path):
 
 
 def test_tossed_objects_slide_and_stay_in_view(tmp_path):
-    """DESIGN §5's toss: the object slides across the views and stays in all of them (visible in
-    every view and frame, its centroid projected inside the middle 80 % of each frame; it may
-    touch a border, as drops do when they squash near a camera), and it travels several times as
-    far as a drop. Low friction: the long slides, where aiming matters."""
+    """A toss (docs/design.md#attribute-ranges): the object slides across the views and stays in
+    all of them (visible in every view and frame, its centroid projected inside the middle 80 % of
+    each frame; it may touch a border, as drops do when they squash near a camera), and it
+    travels several times as far as a drop. Low friction: the long slides, where aiming matters."""
     slippery = {"resolution": 32, "test_objects": 0, "objects": 4, "friction_range": (0.0, 0.1)}
     settings = make_settings(**{**SMALL.to_dict(), **slippery})  # long slides: the hard case
     travel = {}

@@ -86,7 +86,9 @@ def test_launches_mix_drops_and_tosses_and_the_paper_preset_releases_from_rest()
     settings = DataSettings()
     specs = [draw_sample(settings, f"obj-{i}", j) for i in range(100) for j in range(4)]
     tosses = [s for s in specs if s.launch == "toss"]
-    assert 0.42 < len(tosses) / len(specs) < 0.58  # about half each (DESIGN §5)
+    assert (
+        0.42 < len(tosses) / len(specs) < 0.58
+    )  # about half each (docs/design.md#attribute-ranges)
     speeds = np.array([math.hypot(*s.linear_velocity[:2]) for s in tosses])
     low, high = settings.toss_speed_range
     assert speeds.max() <= high + 1e-12 and np.median(speeds) > low  # lowered only to fit the view
