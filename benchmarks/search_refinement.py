@@ -1,18 +1,18 @@
 """Gradient-free refinement by batched re-simulation: how far analysis-by-synthesis gets.
 
 For each test sample of a dataset: the feed-forward estimate (``--model``, true geometry and
-initial state: an upper bound, as ``evaluate``'s † rows), then a coordinate search on the three
-observables (log k/m, log d/m, friction): per round and observable, 7 candidates around the current
-value (the others fixed) are simulated as one batch, rendered into the recording's view at its
-stored resolution, and the one with the lowest photometric error (MSE over frames 1..19) is kept;
-spans 2, 0.7, 0.25 in natural log (friction a quarter of that). Mass stays as predicted (a video
-fixes only k/m and d/m). Errors are split by launch (drop / toss) and shown beside the trivial
-predictor (the training split's median).
+initial state: an upper bound, as ``evaluate``'s † rows), then
+:func:`reconphys.pipeline.search.search`: a coordinate search on the three observables (log k/m,
+log d/m, friction), 7 candidates per observable and round simulated as one batch, rendered into
+the recording's view and compared with frames 1..19 (spans 2, 0.7, 0.25 in natural log; friction
+a quarter). Mass stays as predicted (a video fixes only k/m and d/m). ``evaluate --methods
+reconphys_search`` runs the same search. Errors are split by launch (drop / toss) and shown beside
+the trivial predictor (the training split's median).
 
     python benchmarks/search_refinement.py data/pyb --model runs/pyb --limit 40
 
-A prototype for issue 22's "refinement fast enough to be the default"; the pipeline's own
-refinement is ``predict --refine`` (photometric gradient steps, reconphys.pipeline.refine).
+Issue 22's "refinement fast enough to be the default", measured; ``predict --refine`` is the
+gradient-step refinement (reconphys.pipeline.refine).
 """
 
 from __future__ import annotations
@@ -28,17 +28,13 @@ import torch
 
 from reconphys.data.storage import read_manifest
 from reconphys.models.shipped import load_predictor
-from reconphys.physics import SpringMassModel, State, deform_means, rollout, stable_substeps
-from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.pipeline.predict import predict_observation
 from reconphys.pipeline.samples import load_sample
-from reconphys.render import render
+from reconphys.pipeline.search import search
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
 FRAMES = 20  # frames 0..19: the predictor's window
-SPANS = (2.0, 0.7, 0.25)  # coarse to fine, natural log (friction: a quarter)
-CANDIDATES = 7
 
 
 def observables(attributes: dict[str, float]) -> list[float]:
@@ -48,52 +44,6 @@ def observables(attributes: dict[str, float]) -> list[float]:
         math.log(attributes["damping"] / m),
         attributes["friction"],
     ]
-
-
-@torch.no_grad()
-def photometric_errors(asset, frames, camera, candidates: torch.Tensor) -> torch.Tensor:
-    """MSE over frames 1..T−1 of each candidate [B, 3] (log k/m, log d/m, f) → [B]."""
-    count, physics, mass = len(candidates), asset.physics, asset.physics.mass
-    stiffness = (candidates[:, 0].exp() * mass).clamp(*ATTRIBUTE_RANGES["stiffness"])
-    damping = (candidates[:, 1].exp() * mass).clamp(*ATTRIBUTE_RANGES["damping"])
-    model = SpringMassModel(
-        asset.springs,
-        asset.rest_length,
-        torch.full((count,), mass),
-        stiffness,
-        damping,
-        candidates[:, 2].clamp(0, 1),
-        spring_exponent=physics.spring_exponent,
-        restitution=physics.restitution,
-        gravity=tuple(physics.gravity),
-        ground_height=physics.ground_height,
-    )
-    x0 = asset.x0[None].expand(count, -1, -1)
-    substeps = stable_substeps(model, x0, physics.frame_dt, 25)
-    state = State(x0, asset.v0[None].expand(count, -1, -1))
-    steps = len(frames) - 1
-    trajectory = rollout(model, state, steps, physics.frame_dt, substeps=substeps)
-    x = trajectory.x[:, 1:].reshape(count * steps, -1, 3)
-    g = asset.gaussians
-    means = deform_means(
-        g.means, asset.x0[None], x, asset.binding_index, asset.binding_weight
-    )  # [B·(T−1), N, 3]
-    batch = g.map(lambda t: t.expand(len(x), *t.shape)).with_means(means)
-    images = render(batch, camera.cameras()).rgb[:, 0].reshape(count, steps, *frames.shape[1:])
-    return ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
-
-
-def search(asset, frames, camera, start: torch.Tensor) -> torch.Tensor:
-    current = start.clone()
-    grid = torch.linspace(-1, 1, CANDIDATES)
-    for span in SPANS:
-        for i in range(3):
-            candidates = current.repeat(CANDIDATES, 1)
-            candidates[:, i] = current[i] + grid * (span if i < 2 else span / 4)
-            candidates[:, 2] = candidates[:, 2].clamp(0, 1)
-            errors = photometric_errors(asset, frames, camera, candidates)
-            current = candidates[int(errors.argmin())]
-    return current
 
 
 def main() -> None:
@@ -120,16 +70,18 @@ def main() -> None:
         started = time.perf_counter()
         with torch.no_grad():
             result = predict_observation(observation, predictor, truth=truth)
-        network = torch.tensor(observables(result.attributes))
-        frames = observation.frames[:FRAMES]
-        found = search(result.asset, frames, observation.camera, network)
+        network = observables(result.attributes)
+        found, _ = search(result.asset, observation.frames[:FRAMES], observation.camera)
+        physics = found.physics
+        found = observables({"mass": physics.mass, "stiffness": physics.stiffness,
+                             "damping": physics.damping, "friction": physics.friction})  # fmt: skip
         row = {
             "id": entry["id"],
             "launch": meta["initial_state"].get("launch", "drop"),
             "seconds": time.perf_counter() - started,
             "true": observables(truth.attributes),
-            "network": network.tolist(),
-            "search": found.tolist(),
+            "network": network,
+            "search": found,
         }
         rows.append(row)
         cells = " ".join(

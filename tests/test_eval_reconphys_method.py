@@ -147,3 +147,17 @@ def test_evaluate_model_errors_are_one_line(dataset, tmp_path, monkeypatch):
     assert "model file not found" in line
     line = run("--methods", "trivial", "--model", str(tmp_path / "none.safetensors"))
     assert "--model: only the reconphys methods use a model" in line
+
+
+def test_search_method_starts_from_the_network_on_the_true_geometry(dataset, model_path):
+    """``reconphys_search``: the network's attributes, then the search (pipeline/search.py, tested
+    against the truth in test_pipeline_search.py); mass and geometry as ``reconphys``."""
+    sample = EvalSet(dataset, "test").load(0)
+    options = MethodOptions(trivial=EvalSet(dataset, "test").trivial_attributes(), model=model_path)
+    network = METHODS["reconphys"](options).predict(sample)
+    method = METHODS["reconphys_search"](options)
+    assert method.uses_ground_truth
+    prediction = method.predict(sample)
+    assert prediction.attributes["mass"] == network.attributes["mass"]
+    assert prediction.asset.gaussians is sample.true_asset.gaussians
+    assert torch.equal(prediction.asset.v0, sample.true_asset.v0)

@@ -8,6 +8,8 @@
 - ``appearance``: per-frame position fit, no physics, no future (4DGS-like);
 - ``reconphys``: the trained physics predictor's attributes on the true geometry (upper bound on
   geometry; compare with ``trivial``);
+- ``reconphys_search``: ``reconphys``, then log k/m, log d/m and f fitted to the video by batched
+  re-simulation (:mod:`reconphys.pipeline.search`; upper bound on geometry);
 - ``reconphys_ff``: the whole feed-forward pipeline (3DGS predictor + physics predictor, estimated
   initial velocity): what ``predict VIDEO`` does without a PLY.
 
@@ -23,6 +25,7 @@ from .base import FITTED_GEOMETRY, GROUND_TRUTH_GEOMETRY, Method, MethodOptions,
 from .oracle import OracleMethod
 from .reconphys import ReconPhysMethod
 from .reconphys_ff import ReconPhysFeedForwardMethod
+from .reconphys_search import ReconPhysSearchMethod
 from .springgaus import SpringGausMethod, SpringGausTruthMethod
 from .trivial import TrivialMethod
 
@@ -33,6 +36,7 @@ METHODS: dict[str, type[Method]] = {
     "springgaus_gt": SpringGausTruthMethod,
     "appearance": AppearanceMethod,
     "reconphys": ReconPhysMethod,
+    "reconphys_search": ReconPhysSearchMethod,
     "reconphys_ff": ReconPhysFeedForwardMethod,
 }
 
