@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import platform
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import torch
 
@@ -30,20 +30,11 @@ from reconphys.data.storage import read_manifest
 from reconphys.models.shipped import load_predictor
 from reconphys.pipeline.predict import predict_observation
 from reconphys.pipeline.samples import load_sample
-from reconphys.pipeline.search import search
+from reconphys.pipeline.search import observables, search
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
 FRAMES = 20  # frames 0..19: the predictor's window
-
-
-def observables(attributes: dict[str, float]) -> list[float]:
-    m = attributes["mass"]
-    return [
-        math.log(attributes["stiffness"] / m),
-        math.log(attributes["damping"] / m),
-        attributes["friction"],
-    ]
 
 
 def main() -> None:
@@ -58,8 +49,14 @@ def main() -> None:
     root = Path(args.data)
     manifest = read_manifest(root)
     train = [s for s in manifest["samples"] if s["split"] == "train"]
-    values = [observables(json.loads((root / s["dir"] / "sample.json").read_text())["attributes"])
-              for s in train]  # fmt: skip
+    values = [
+        observables(
+            SimpleNamespace(
+                **json.loads((root / s["dir"] / "sample.json").read_text())["attributes"]
+            )
+        ).tolist()
+        for s in train
+    ]
     median = [sorted(v[i] for v in values)[len(values) // 2] for i in range(3)]
     tests = [s for s in manifest["samples"] if s["split"] == "test"][: args.limit]
     predictor = load_predictor(args.model)
@@ -70,18 +67,14 @@ def main() -> None:
         started = time.perf_counter()
         with torch.no_grad():
             result = predict_observation(observation, predictor, truth=truth)
-        network = observables(result.attributes)
         found, _ = search(result.asset, observation.frames[:FRAMES], observation.camera)
-        physics = found.physics
-        found = observables({"mass": physics.mass, "stiffness": physics.stiffness,
-                             "damping": physics.damping, "friction": physics.friction})  # fmt: skip
         row = {
             "id": entry["id"],
             "launch": meta["initial_state"].get("launch", "drop"),
             "seconds": time.perf_counter() - started,
-            "true": observables(truth.attributes),
-            "network": network,
-            "search": found,
+            "true": observables(truth.asset.physics).tolist(),
+            "network": observables(result.asset.physics).tolist(),
+            "search": observables(found.physics).tolist(),
         }
         rows.append(row)
         cells = " ".join(

@@ -48,6 +48,17 @@ def observables(physics) -> Tensor:  # [3] (log k/m, log d/m, f)
     )
 
 
+def attributes_of(values: Tensor, mass: float) -> dict[str, Tensor]:
+    """(log k/m, log d/m, f) [B, 3] → stiffness, damping, friction [B], inside the attribute ranges
+    (the mass is kept: only the ratios are observable)."""
+    ranges = ATTRIBUTE_RANGES
+    return {
+        "stiffness": (values[:, 0].exp() * mass).clamp(*ranges["stiffness"]),
+        "damping": (values[:, 1].exp() * mass).clamp(*ranges["damping"]),
+        "friction": values[:, 2].clamp(0.0, 1.0),
+    }
+
+
 @torch.no_grad()
 def photometric_errors(
     asset: Asset,
@@ -58,16 +69,14 @@ def photometric_errors(
 ) -> Tensor:  # [B] mean squared error over frames 1..T−1
     """Simulate the asset with each candidate's attributes (mass kept) and score its video."""
     count, physics = len(candidates), asset.physics
-    mass = torch.full((count,), physics.mass)
-    stiffness = (candidates[:, 0].exp() * physics.mass).clamp(*ATTRIBUTE_RANGES["stiffness"])
-    damping = (candidates[:, 1].exp() * physics.mass).clamp(*ATTRIBUTE_RANGES["damping"])
+    values = attributes_of(candidates, physics.mass)
     model = SpringMassModel(
         asset.springs,
         asset.rest_length,
-        mass,
-        stiffness.float(),
-        damping.float(),
-        candidates[:, 2].clamp(0, 1).float(),
+        torch.full((count,), physics.mass),
+        values["stiffness"].float(),
+        values["damping"].float(),
+        values["friction"].float(),
         spring_exponent=physics.spring_exponent,
         restitution=physics.restitution,
         gravity=tuple(physics.gravity),
@@ -121,23 +130,16 @@ def search(
             trial[:, 2] = trial[:, 2].clamp(0.0, 1.0)
             errors = photometric_errors(asset, frames, camera, trial)
             pick = int(errors.argmin())
-            centre = half  # the current value: kept unless another is clearly better
-            if not errors[pick] < errors[centre] * (1.0 - TIE):
-                pick = centre
+            if not errors[pick] < errors[half] * (1.0 - TIE):
+                pick = half  # the current value: kept unless another is clearly better
             current, best_error = trial[pick], float(errors[pick])
             rounds.append(
                 {"observable": name, "values": trial[:, i].tolist(), "errors": errors.tolist()}
             )
-    physics, ranges = asset.physics, ATTRIBUTE_RANGES
-    found = {}  # only what moved: exp(log(k/m))·m would not give back k to the last bit
-    if current[0] != start[0]:
-        found["stiffness"] = min(max(math.exp(current[0]) * physics.mass, ranges["stiffness"][0]),
-                                 ranges["stiffness"][1])  # fmt: skip
-    if current[1] != start[1]:
-        found["damping"] = min(max(math.exp(current[1]) * physics.mass, ranges["damping"][0]),
-                               ranges["damping"][1])  # fmt: skip
-    if current[2] != start[2]:
-        found["friction"] = float(current[2])
+    # only what moved: exp(log(k/m))·m would not give back k to the last bit
+    values = attributes_of(current[None], asset.physics.mass)
+    names = ("stiffness", "damping", "friction")
+    found = {name: float(values[name][0]) for i, name in enumerate(names) if current[i] != start[i]}
     history = {
         "method": "coordinate search (pipeline/search.py)",
         "start": dict(zip(OBSERVABLES, start.tolist(), strict=True)),
@@ -147,4 +149,4 @@ def search(
         "render_size": list(size),
         "seconds": round(time.perf_counter() - started, 2),
     }
-    return replace(asset, physics=replace(physics, **found)), history
+    return replace(asset, physics=replace(asset.physics, **found)), history
