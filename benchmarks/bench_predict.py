@@ -84,6 +84,7 @@ def main() -> None:
             str(bundle / "video.mp4"),
             camera=bundle / "camera.json",
             gaussians=bundle / "gaussians.ply",
+            refine=False,
         )
         # the large object where the small one is: same centre, its own size (0.5 m)
         shift = reference.asset.gaussians.means.mean(0) - big.means.mean(0)
@@ -108,6 +109,7 @@ def main() -> None:
                 camera=bundle / "camera.json",
                 device=args.device,
                 placement="as-is",
+                refine=False,  # the feed-forward steps (the search: search_refinement.py)
                 **extra,
             )
             result = predict(**kwargs)  # warm-up: Numba compilation, allocator, file cache

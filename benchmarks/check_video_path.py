@@ -61,8 +61,9 @@ def main() -> None:
                 camera=bundle / "camera.json",
                 gaussians=bundle / "gaussians.ply",
                 model=args.model,
+                refine=False,
             )
-            stored = predict(args.data, sample=entry["id"], model=args.model)
+            stored = predict(args.data, sample=entry["id"], model=args.model, refine=False)
             medians = video.details.get("trivial") or _medians(stored)
             truth = observables(entry["attributes"])
             for path, attributes in (

@@ -67,7 +67,7 @@ def main() -> None:
     rows = []
     for index in range(len(eval_set)):
         sample = eval_set.load(index)
-        result = predict(args.data, sample=sample.id, model=args.model)
+        result = predict(args.data, sample=sample.id, model=args.model, refine=False)
         observation = result.observation  # the model's view of the stored frames
         started = time.perf_counter()
         refined, history = refine(result.asset, observation, args.steps, resolution=args.resolution)

@@ -30,7 +30,14 @@ from reconphys.data.storage import read_manifest
 from reconphys.models.shipped import load_predictor
 from reconphys.pipeline.predict import predict_observation
 from reconphys.pipeline.samples import load_sample
-from reconphys.pipeline.search import observables, search
+from reconphys.pipeline.search import (
+    OBSERVABLES,
+    TEMPERATURE,
+    observable_bounds,
+    observables,
+    profile_interval,
+    search,
+)
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
@@ -44,6 +51,13 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=40, help="first N test samples")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", default=None, help="per-sample results (JSON)")
+    parser.add_argument("--split", default="test", help="split to run on (train: calibration)")
+    parser.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="print the 10–90 %% coverage for a range of profile temperatures and the one that "
+        "covers 80 %% (run it on training objects, not the test split)",
+    )
     args = parser.parse_args()
     set_cpu_threads(args.threads)
     root = Path(args.data)
@@ -58,7 +72,7 @@ def main() -> None:
         for s in train
     ]
     median = [sorted(v[i] for v in values)[len(values) // 2] for i in range(3)]
-    tests = [s for s in manifest["samples"] if s["split"] == "test"][: args.limit]
+    tests = [s for s in manifest["samples"] if s["split"] == args.split][: args.limit]
     predictor = load_predictor(args.model)
     rows = []
     for entry in tests:
@@ -66,8 +80,13 @@ def main() -> None:
         meta = json.loads((root / entry["dir"] / "sample.json").read_text())
         started = time.perf_counter()
         with torch.no_grad():
-            result = predict_observation(observation, predictor, truth=truth)
-        found, _ = search(result.asset, observation.frames[:FRAMES], observation.camera)
+            result = predict_observation(observation, predictor, truth=truth, refine=False)
+        found, history = search(
+            result.asset,
+            observation.frames[:FRAMES],
+            observation.camera,
+            masks=observation.masks[:FRAMES],
+        )
         row = {
             "id": entry["id"],
             "launch": meta["initial_state"].get("launch", "drop"),
@@ -75,6 +94,8 @@ def main() -> None:
             "true": observables(truth.asset.physics).tolist(),
             "network": observables(result.asset.physics).tolist(),
             "search": observables(found.physics).tolist(),
+            "intervals": [history["intervals"][n] for n in OBSERVABLES],
+            "profiles": [history["profiles"][n] for n in OBSERVABLES],
         }
         rows.append(row)
         cells = " ".join(
@@ -98,8 +119,47 @@ def main() -> None:
             cells.append(f"{name} net {ratio['network']:.2f}× search {ratio['search']:.2f}×")
         seconds = sum(r["seconds"] for r in chosen) / len(chosen)
         print(f"{kind:5} n={len(chosen):3}: " + "; ".join(cells) + f"; {seconds:.1f} s/scene")
+        print(f"      10–90 % intervals (τ = {TEMPERATURE}): {coverage_line(chosen)}")
+    if args.calibrate:
+        calibrate(rows)
     if args.out:
         Path(args.out).write_text(json.dumps(rows, indent=1))
+
+
+def coverage_line(rows: list[dict], intervals: str = "intervals") -> str:
+    """Coverage and mean width of the intervals, per observable."""
+    cells = []
+    for i, name in enumerate(NAMES):
+        inside = [r[intervals][i][0] <= r["true"][i] <= r[intervals][i][1] for r in rows]
+        width = sum(r[intervals][i][1] - r[intervals][i][0] for r in rows) / len(rows)
+        cells.append(f"{name} covers {sum(inside) / len(rows):.0%}, width {width:.2f}")
+    return "; ".join(cells)
+
+
+def calibrate(rows: list[dict]) -> None:
+    """Intervals for a range of temperatures from the stored profiles; the one whose mean coverage
+    over the three observables is nearest 80 %."""
+    bounds = observable_bounds()
+    best = None
+    for temperature in (0.01, 0.03, 0.1, 0.3, 0.5, 0.7, 1.0, 1.2, 1.5, 2.0, 3.0):
+        for r in rows:
+            r["trial"] = [
+                profile_interval(
+                    torch.tensor(p["values"]),
+                    torch.tensor(p["errors"]),
+                    tuple(bounds[i].tolist()),
+                    temperature,
+                )
+                for i, p in enumerate(r["profiles"])
+            ]
+        inside = [
+            r["trial"][i][0] <= r["true"][i] <= r["trial"][i][1] for r in rows for i in range(3)
+        ]
+        coverage = sum(inside) / len(inside)
+        print(f"τ = {temperature:<6} mean coverage {coverage:.0%}: {coverage_line(rows, 'trial')}")
+        if best is None or abs(coverage - 0.8) < best[0]:
+            best = (abs(coverage - 0.8), temperature)
+    print(f"calibrated τ = {best[1]} (set TEMPERATURE in pipeline/search.py)")
 
 
 if __name__ == "__main__":

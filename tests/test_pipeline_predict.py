@@ -81,24 +81,33 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
         assert (out / name).is_file(), name
     summary = json.loads((out / "prediction.json").read_text())
     assert summary["placement"] == "as-is" and summary["silhouette_iou_given"] > 0.5
-    for step in ("decode", "gaussians", "physics_network", "asset_build", "write", "preview"):
+    steps = ("decode", "gaussians", "physics_network", "asset_build", "search", "write", "preview")
+    for step in steps:
         assert summary["timings_s"][step] >= 0
+    intervals = summary["intervals"]  # the default path searches and gives an interval each
+    assert list(intervals) == ["log_k_over_m", "log_d_over_m", "friction"]
+    assert all(low <= high for low, high in intervals.values())
+    assert "search:" in result.output and "10–90 %" in result.output
     preview = imageio.mimread(out / "preview.mp4")
     assert len(preview) == 30  # at least the observed frames
     assert preview[0].shape[1] > 2 * preview[0].shape[0]  # observed | simulated side by side
 
     stored, stored_out = _predict(
-        [dataset, "--sample", sample_id, "--preview-frames", "0"], tmp_path, "stored"
+        [dataset, "--sample", sample_id, "--preview-frames", "0", "--no-refine"], tmp_path, "ff"
     )
     assert stored.exit_code == 0, stored.output
+    assert "no intervals" in stored.output
     reference = json.loads((stored_out / "prediction.json").read_text())
     assert reference["geometry"].startswith("ground truth")
-    a, b = summary["attributes"], reference["attributes"]
+    assert reference["intervals"] is None and "search" not in reference["timings_s"]
+    assert reference["attributes"] == reference["feed_forward"]
+    a, b = summary["feed_forward"], reference["attributes"]
     # H.264 at 32 px changes the input a little: the prediction may move, not jump
     assert abs(math.log(a["stiffness"] / a["mass"]) - math.log(b["stiffness"] / b["mass"])) < 0.5
     assert abs(a["friction"] - b["friction"]) < 0.2
     physics = json.loads((out / "physics.json").read_text())
-    assert physics["stiffness"] == pytest.approx(a["stiffness"], rel=1e-6)
+    assert physics["stiffness"] == pytest.approx(summary["attributes"]["stiffness"], rel=1e-6)
+    assert physics["intervals"] == intervals
 
 
 def test_refine_from_the_command_line(dataset, sample_id, tmp_path):
@@ -107,7 +116,8 @@ def test_refine_from_the_command_line(dataset, sample_id, tmp_path):
             dataset,
             "--sample",
             sample_id,
-            "--refine",
+            "--no-refine",
+            "--refine-steps",
             "2",
             "--refine-resolution",
             "16",

@@ -14,8 +14,18 @@ import pytest
 import torch
 
 from reconphys.data import make_dataset, make_settings
+from reconphys.physics import scene_stable_substeps, stable_substeps
+from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.pipeline.samples import load_sample
-from reconphys.pipeline.search import observables, search
+from reconphys.pipeline.search import (
+    attributes_of,
+    object_window,
+    observable_bounds,
+    observables,
+    profile_interval,
+    search,
+    substep_groups,
+)
 from reconphys.threads import set_cpu_threads
 
 
@@ -62,7 +72,13 @@ def test_search_walks_back_to_the_true_observables(sample):
     after = observables(found.physics)
     before_error, after_error = (start - true).abs(), (after - true).abs()
     assert history["error"] <= min(history["rounds"][0]["errors"])  # never worse than a step
-    assert found.physics.mass == physics.mass  # only ratios are observable
+    ranges = ATTRIBUTE_RANGES
+    for name in ("mass", "stiffness", "damping", "friction"):
+        low, high = ranges[name]
+        assert low <= getattr(found.physics, name) <= high
+    bounds = observable_bounds()
+    for i, (low, high) in enumerate(history["intervals"].values()):
+        assert bounds[i, 0] <= low <= high <= bounds[i, 1]
     assert after_error[0] < 0.25 * before_error[0], (true, start, after)  # log k/m
     assert after_error[2] < 0.5 * before_error[2], (true, start, after)  # friction
     assert after_error.sum() < 0.5 * before_error.sum()
@@ -80,7 +96,100 @@ def test_search_keeps_what_the_video_does_not_show(sample, monkeypatch):
     from reconphys.pipeline import search as module
 
     observation, truth = sample
-    monkeypatch.setattr(module, "photometric_errors", lambda *a: torch.full((7,), 1e-3))
+    monkeypatch.setattr(
+        module, "photometric_errors", lambda a, f, c, x: torch.full((len(x),), 1e-3)
+    )
     found, history = search(truth.asset, observation.frames[:20], observation.camera)
     assert found.physics == truth.asset.physics
-    assert len(history["rounds"]) == 9
+    assert len(history["rounds"]) == 9 + 3  # the spans, then one profile per observable
+    bounds = observable_bounds()
+    for i, (low, high) in enumerate(history["intervals"].values()):  # flat: the prior's 10–90 %
+        width = float(bounds[i, 1] - bounds[i, 0])
+        assert low == pytest.approx(float(bounds[i, 0]) + 0.1 * width, abs=0.01 * width)
+        assert high == pytest.approx(float(bounds[i, 0]) + 0.9 * width, abs=0.01 * width)
+
+
+def test_profile_interval_of_a_sharp_minimum_is_narrow_and_holds_it():
+    """Quadratic errors: the posterior is Gaussian with σ² = τ·E_min / (2a); its 10–90 % interval
+    is ±1.2816 σ around the minimum."""
+    values = torch.linspace(0.0, 10.0, 401, dtype=torch.float64)
+    best, curvature, floor, temperature = 6.3, 0.01, 1e-2, 0.05
+    errors = floor + curvature * (values - best) ** 2
+    low, high = profile_interval(values, errors, (0.0, 10.0), temperature, points=4001)
+    sigma = math.sqrt(temperature * floor / (2 * curvature))
+    assert sigma > 0.1  # well resolved by the grid (0.025) and the quantile line (0.0025)
+    assert low == pytest.approx(best - 1.2816 * sigma, abs=0.01)
+    assert high == pytest.approx(best + 1.2816 * sigma, abs=0.01)
+
+
+def test_attributes_of_keeps_the_mass_unless_a_ratio_needs_another():
+    mass = 1.0
+    values = torch.tensor([[math.log(300.0), math.log(2.0), 0.4],  # reachable with m = 1
+                           [math.log(3000.0), math.log(2.0), 0.4],  # k/m = 3000: m ≤ 0.4
+                           [math.log(5.0), math.log(0.05), 0.4]],  # d/m = 0.05: m ≥ 2
+                          dtype=torch.float64)  # fmt: skip
+    out = attributes_of(values, mass)
+    assert out["mass"].tolist() == pytest.approx([1.0, 0.4, 2.0])
+    ratios = torch.stack([out["stiffness"] / out["mass"], out["damping"] / out["mass"]], 1)
+    assert ratios.log() == pytest.approx(values[:, :2], abs=1e-9)  # the ratios are exact
+
+
+def test_substeps_per_candidate_and_their_groups(sample):
+    _, truth = sample
+    asset = truth.asset
+    model = asset.model()
+    stiff = [10.0, 30.0, 100.0, 1000.0]
+    x0 = asset.x0[None].expand(len(stiff), -1, -1)
+    batch = model.with_attributes(stiffness=torch.tensor(stiff), mass=torch.ones(len(stiff)))
+    need = scene_stable_substeps(batch, x0, 0.03, 1)
+    assert max(need) == stable_substeps(batch, x0, 0.03, 1)  # the batch's is the largest
+    for b, k in enumerate(stiff):  # each alone as stable_substeps computes it
+        one = model.with_attributes(stiffness=torch.tensor([k]), mass=torch.ones(1))
+        assert need[b] == stable_substeps(one, x0[:1], 0.03, 1)
+    assert need == sorted(need) and need[-1] > need[0]
+    groups = substep_groups([10, 40, 11, 12, 41, 100], ratio=1.5)
+    assert groups == [[0, 2, 3], [1, 4], [5]]
+
+
+def test_a_cropped_camera_renders_the_crop_of_the_full_image(sample):
+    """The search compares only the object's window: its camera (principal point moved) must
+    render exactly that window of the full image."""
+    from reconphys.render import render
+
+    observation, truth = sample
+    camera = observation.camera
+    full = render(truth.asset.gaussians, camera.cameras()).rgb[0]  # [H, W, 3]
+    left, top, width, height = 3, 5, 14, 11
+    window = render(truth.asset.gaussians, camera.cropped(left, top, width, height).cameras())
+    crop = full[top : top + height, left : left + width]
+    assert window.rgb[0].shape == crop.shape
+    assert torch.allclose(window.rgb[0], crop, atol=1e-5)
+
+
+def test_object_window_holds_every_frame_mask_with_a_margin():
+    masks = torch.zeros(3, 40, 50)
+    masks[0, 10:14, 20:24] = 1  # falls and slides right
+    masks[2, 30:34, 28:36] = 1
+    left, top, width, height = object_window(masks, margin=0.25)
+    # box rows 10..33 (24 tall: grow 6), cols 20..35 (16 wide: grow 4)
+    assert (left, top, width, height) == (16, 4, 24, 36)
+    assert object_window(torch.zeros(2, 8, 8)) is None
+    edge = torch.zeros(1, 10, 10)
+    edge[0, 0:3, 7:10] = 1
+    assert object_window(edge) == (5, 0, 5, 5)  # clipped to the image
+
+
+def test_a_clip_that_ends_before_the_contact_shows_no_observable(sample):
+    """Before the object touches the ground it falls as a rigid body: no frame tells its stiffness,
+    damping or friction, and the intervals must say so (wide: most of the prior's 10–90 %), not
+    give a confident value."""
+    observation, truth = sample
+    heights = truth.asset.simulate(19).x[0, :, :, 2].amin(-1)  # [T] lowest anchor per frame
+    contact = int((heights <= truth.asset.physics.ground_height + 1e-3).nonzero()[0])
+    assert contact >= 3, contact
+    frames = observation.frames[:contact]  # frames before the first contact
+    _, history = search(truth.asset, frames, observation.camera, spans=(0.25,))
+    bounds = observable_bounds()
+    for i, (name, (low, high)) in enumerate(history["intervals"].items()):
+        prior = 0.8 * float(bounds[i, 1] - bounds[i, 0])
+        assert high - low > 0.7 * prior, (name, low, high)

@@ -212,7 +212,12 @@ def derived_figures(asset: Asset) -> dict:
 # writing
 
 
-def write_asset(asset: Asset, folder: str | os.PathLike, overwrite: bool = False) -> Path:
+def write_asset(
+    asset: Asset,
+    folder: str | os.PathLike,
+    overwrite: bool = False,
+    notes: dict | None = None,  # extra keys of physics.json (predict: the intervals); not read
+) -> Path:
     """Write ``asset`` to ``folder`` atomically; refuses an existing folder unless ``overwrite``."""
     folder = Path(folder)
     validate_asset(asset, str(folder))
@@ -235,6 +240,7 @@ def write_asset(asset: Asset, folder: str | os.PathLike, overwrite: bool = False
         physics.update({k: v for k, v in vars(asset.physics).items()})
         physics["gravity"] = [float(g) for g in asset.physics.gravity]
         physics["derived"] = derived_figures(asset)
+        physics.update(notes or {})
         with open(staging / "physics.json", "w") as f:
             json.dump(physics, f, indent=2)
             f.write("\n")

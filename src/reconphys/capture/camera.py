@@ -58,6 +58,14 @@ class CameraSpec:
             self.source,
         )
 
+    def cropped(self, left: int, top: int, width: int, height: int) -> CameraSpec:
+        """The same camera for the image window [top, top+height) × [left, left+width) in pixels
+        (the principal point moves by the window's corner)."""
+        K = self.K.clone()
+        K[0, 2] -= left
+        K[1, 2] -= top
+        return CameraSpec(K, self.world_to_cam, width, height, self.ground_height, self.source)
+
     def to_json(self) -> dict:
         return {
             "K": self.K.double().tolist(),

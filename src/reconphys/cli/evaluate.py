@@ -62,7 +62,12 @@ def evaluate(
     if sheet_samples < 0 or threads < 0:
         flag = "--sheet-samples" if sheet_samples < 0 else "--threads"
         raise InputError("must be ≥ 0", field=flag)
-    if model is not None and not {"reconphys", "reconphys_search", "reconphys_ff"} & set(names):
+    if model is not None and not {
+        "reconphys",
+        "reconphys_search",
+        "reconphys_ff",
+        "reconphys_video",
+    } & set(names):
         raise InputError("only the reconphys methods use a model; add one to --methods", "--model")
     torch_device = resolve_device(device)
     check_output(out, overwrite)

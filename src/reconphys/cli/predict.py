@@ -19,6 +19,7 @@ TIMING_ORDER = (
     "gaussians",
     "physics_network",
     "asset_build",
+    "search",
     "refine",
     "write",
     "preview",
@@ -55,7 +56,15 @@ def predict_command(
         "camera", help="Ground plane: camera (its file's ground_height, else 0) or landed."
     ),
     anchors: int = typer.Option(None, help="Anchors N_A (default: the model's training data)."),
-    refine: int = typer.Option(0, "--refine", help="Test-time refinement steps (0: none)."),
+    refine: bool = typer.Option(
+        True,
+        "--refine/--no-refine",
+        help="Fit k/m, d/m and friction to the recording by batched re-simulation (seconds), "
+        "with a 10–90 % interval each; --no-refine: the feed-forward network alone (< 1 s).",
+    ),
+    refine_steps: int = typer.Option(
+        0, "--refine-steps", help="Gradient refinement steps after that (minutes; 0: none)."
+    ),
     refine_resolution: int = typer.Option(64, help="Render size of the refinement, pixels."),
     preview_frames: int = typer.Option(60, help="Frames in preview.mp4 (0: no preview)."),
     device: str = typer.Option("auto", help=f"{DEVICE_CHOICES}."),
@@ -90,7 +99,8 @@ def predict_command(
         placement=placement,
         ground=ground,
         num_anchors=anchors,
-        refine_steps=refine,
+        refine=refine,
+        refine_steps=refine_steps,
         refine_resolution=refine_resolution,
         device=torch_device,
         progress=True,
@@ -103,6 +113,20 @@ def predict_command(
         f"{attributes['friction']:.2f} ({summary['anchors']} anchors, {summary['gaussians']} "
         f"Gaussians; geometry: {summary['geometry']})"
     )
+    intervals = summary["intervals"]
+    if intervals:
+        s = summary["search"]
+        lines = [
+            f"  {name:<13} {summary['observables'][name]:7.3f}   [{lo:7.3f}, {hi:7.3f}]"
+            for name, (lo, hi) in intervals.items()
+        ]
+        typer.echo(
+            f"search: {s['rollouts']} batched rollouts in {s['seconds']} s; observable, best, "
+            "10–90 % interval (natural logs of the SI ratios; a wide one: the video does not "
+            "show it):\n" + "\n".join(lines)
+        )
+    else:
+        typer.echo("no intervals: the feed-forward answer alone (--no-refine)")
     if "refine" in summary:
         r = summary["refine"]
         typer.echo(

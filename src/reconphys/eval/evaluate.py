@@ -85,6 +85,7 @@ class SampleResult:
     predicted_attributes: dict[str, float] | None
     seconds: float | None  # predict wall-clock
     failure: str | None = None
+    intervals: dict[str, list[float]] | None = None  # the method's 10–90 % intervals, if any
     info: dict = field(default_factory=dict)
     sheet: np.ndarray | None = None  # [T', H, W, 3] uint8, view 0, kept for a few samples
 
@@ -206,6 +207,7 @@ def evaluate_prediction(
         predicted_attributes=prediction.attributes,
         seconds=seconds,
         info=prediction.info,
+        intervals=prediction.intervals,
         sheet=sheet if keep_sheet else None,
     )
 

@@ -336,6 +336,22 @@ def _table_attributes(document: dict) -> list[str]:
             + " | ".join(_cell(mae[k], "{:.4g}") for k in keys)
             + " |"
         )
+    with_intervals = {n: e for n, e in methods.items() if e.get("intervals")}
+    if with_intervals:
+        lines += [
+            "",
+            "### 10–90 % intervals: coverage of the truth (calibrated: about 80 %) and mean width",
+            "",
+            "| method | log(k/m) | log(d/m) | friction |",
+            "|---|---|---|---|",
+        ]
+        for name, entry in with_intervals.items():
+            cells = [
+                f"{entry['intervals'][k]['coverage']:.0%}, width "
+                f"{entry['intervals'][k]['mean_width']:.3g}"
+                for k in ("log_k_over_m", "log_d_over_m", "friction")
+            ]
+            lines.append(f"| {_row_label(name, entry)} | " + " | ".join(cells) + " |")
     return lines
 
 

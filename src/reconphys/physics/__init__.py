@@ -21,7 +21,7 @@ from .reference import (
     step,
 )
 from .rollout import Trajectory, rollout
-from .stability import stable_substeps
+from .stability import scene_stable_substeps, stable_substeps
 from .state import Control, State
 
 __all__ = [
@@ -40,6 +40,7 @@ __all__ = [
     "potential_energy",
     "rollout",
     "sample_volume_anchors",
+    "scene_stable_substeps",
     "seed_from_id",
     "spring_energy",
     "spring_forces",

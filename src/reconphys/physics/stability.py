@@ -61,11 +61,11 @@ def largest_eigenvalue(
 
 
 @torch.no_grad()
-def stability_rates(
+def scene_stability_rates(
     model: SpringMassModel,
     x: Tensor,  # [B, N_A, 3] positions, metres
-) -> tuple[float, float]:
-    """Bounds over the batch on the squared frequency Ω² (1/s²) and damping rate C (1/s).
+) -> tuple[Tensor, Tensor]:  # [B'] each (B' = 1 when one value serves every scene)
+    """Bounds per scene on the squared frequency Ω² (1/s²) and damping rate C (1/s).
 
     Ω² is the largest eigenvalue of M⁻¹K, with K the spring constants k/l scaled by the stiffening
     of the non-linear law up to MAX_STRAIN_FOR_BOUND; C that of M⁻¹D with dashpots d/l. Both get
@@ -88,10 +88,16 @@ def stability_rates(
         omega_sq = largest_eigenvalue(model, x, model.stiffness, model.mass)
         damping_rate = largest_eigenvalue(model, x, model.damping, model.mass)
     margin = EIGENVALUE_MARGIN
-    return (
-        margin * stiffening * omega_sq.max().item(),
-        margin * damping_rate.max().item(),
-    )
+    return margin * stiffening * omega_sq, margin * damping_rate
+
+
+def stability_rates(
+    model: SpringMassModel,
+    x: Tensor,  # [B, N_A, 3] positions, metres
+) -> tuple[float, float]:
+    """Bounds over the batch on Ω² (1/s²) and C (1/s) (see :func:`scene_stability_rates`)."""
+    omega_sq, damping_rate = scene_stability_rates(model, x)
+    return omega_sq.max().item(), damping_rate.max().item()
 
 
 def stable_substeps(
@@ -107,9 +113,36 @@ def stable_substeps(
     h²Ω² + 2hC = 4·SAFETY for h. The result never falls below ``min_substeps``. It depends on k/m
     and d/m only, so scaling (m, k, d) together does not change it.
     """
+    _check_mass(model)
+    omega_sq, damping_rate = stability_rates(model, x)
+    return _substeps_for(omega_sq, damping_rate, frame_dt, min_substeps)
+
+
+def scene_stable_substeps(
+    model: SpringMassModel,
+    x: Tensor,  # [B, N_A, 3] positions (the initial state), metres
+    frame_dt: float = 0.03,
+    min_substeps: int = 1,
+) -> list[int]:  # [B] the substeps each scene needs on its own (one entry when all share them)
+    """:func:`stable_substeps` per scene: a batch of candidates can be rolled out in groups of
+    similar need instead of all at the stiffest one's step."""
+    _check_mass(model)
+    omega_sq, damping_rate = scene_stability_rates(model, x)
+    count = max(len(omega_sq), len(damping_rate))
+    omega_sq, damping_rate = omega_sq.expand(count), damping_rate.expand(count)
+    return [
+        _substeps_for(float(w), float(c), frame_dt, min_substeps)
+        for w, c in zip(omega_sq, damping_rate, strict=True)
+    ]
+
+
+def _check_mass(model: SpringMassModel) -> None:
     if not (torch.isfinite(model.mass).all() and (model.mass > 0).all()):
         raise ValueError("mass must be finite and positive")
-    omega_sq, damping_rate = stability_rates(model, x)
+
+
+def _substeps_for(omega_sq: float, damping_rate: float, frame_dt: float, min_substeps: int) -> int:
+    """The smallest substep count with h²Ω² + 2hC ≤ 4·SAFETY (and ≥ ``min_substeps``)."""
     budget = 4.0 * SAFETY
     if not (math.isfinite(omega_sq) and math.isfinite(damping_rate)):
         raise ValueError("attributes give no stable step (non-finite stiffness or damping)")

@@ -10,7 +10,9 @@ Steps, each timed (``PredictResult.timings``, seconds):
   masks' free fall;
 - ``physics_network``: the physics predictor on frames 0..T−1 → (m, k, d, f);
 - ``asset_build``: anchors (seeded by the object id), kNN springs, binding;
-- ``refine`` (optional): test-time photometric refinement (:mod:`.refine`).
+- ``search`` (the default; ``refine=False`` skips it): log k/m, log d/m and the friction fitted to
+  the recording by batched re-simulation, with a 10–90 % interval for each (:mod:`.search`);
+- ``refine`` (optional, ``refine_steps``): gradient steps on the photometric loss (:mod:`.refine`).
 
 The asset is written by :func:`write_outputs` (``write`` and ``preview`` timings).
 """
@@ -34,11 +36,17 @@ from ..models.model_input import predictor_frames
 from ..models.reconstruct import initial_velocity, observed_asset, predicted_gaussians
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
+from .search import OBSERVABLES, observables
 
 PLACEMENTS = ("auto", "as-is", "fit")
 GROUNDS = ("camera", "landed")
 GEOMETRIES = ("auto", "predicted")
 GT_GEOMETRY = "ground truth (the dataset sample's Gaussians and initial state): an upper bound"
+INTERVALS_HOW = (
+    "10–90 % of the posterior along each observable's profile (the others at their best): "
+    "pipeline/search.py; a wide interval means the recording does not show that observable"
+)
+NO_INTERVALS = "none: the feed-forward network alone gives no interval (run without --no-refine)"
 
 
 @dataclass
@@ -48,11 +56,17 @@ class PredictResult:
     attributes: dict[str, float]  # the feed-forward prediction (before any refinement)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per step
     details: dict = field(default_factory=dict)  # geometry, placement, velocity, model, refine
+    # 10–90 % interval of each observable (log_k_over_m, log_d_over_m: natural logs of the SI
+    # ratios; friction) from the search's profiles; None without the search (--no-refine)
+    intervals: dict[str, list[float]] | None = None
 
     def summary(self) -> dict:
         physics = self.asset.physics
         return {
             "attributes": {n: getattr(physics, n) for n in ATTRIBUTES},
+            "observables": dict(zip(OBSERVABLES, observables(physics).tolist(), strict=True)),
+            "intervals": self.intervals,
+            "intervals_how": INTERVALS_HOW if self.intervals else NO_INTERVALS,
             "feed_forward": self.attributes,
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             **self.details,
@@ -107,6 +121,7 @@ def predict(
     placement: str = "auto",
     ground: str = "camera",
     num_anchors: int | None = None,
+    refine: bool = True,
     refine_steps: int = 0,
     refine_resolution: int = 64,
     device: str | torch.device = "cpu",
@@ -129,7 +144,7 @@ def predict(
     if ground not in GROUNDS:
         raise InputError(f"expected camera or landed, got {ground!r}", field="--ground")
     if refine_steps < 0:
-        raise InputError(f"must be ≥ 0, got {refine_steps}", field="--refine")
+        raise InputError(f"must be ≥ 0, got {refine_steps}", field="--refine-steps")
     torch.set_flush_denormal(True)
     timings: dict[str, float] = {}
     details: dict = {}
@@ -180,6 +195,7 @@ def predict(
         placement=placement,
         ground=ground,
         num_anchors=num_anchors,
+        refine=refine,
         refine_steps=refine_steps,
         refine_resolution=refine_resolution,
         progress=progress,
@@ -199,6 +215,7 @@ def predict_observation(
     placement: str = "auto",
     ground: str = "camera",
     num_anchors: int | None = None,
+    refine: bool = True,
     refine_steps: int = 0,
     refine_resolution: int = 64,
     progress: bool = False,
@@ -281,11 +298,28 @@ def predict_observation(
     details["springs"] = int(asset.springs.shape[0])
     details["gaussians"] = asset.gaussians.num_gaussians
 
-    if refine_steps:
-        from .refine import refine
+    intervals = None
+    if refine:
+        from .search import search
 
         started = time.perf_counter()
-        asset, history = refine(
+        count = predictor.num_frames
+        asset, history = search(
+            asset,
+            observation.frames[:count],
+            observation.camera,
+            resolution=refine_resolution,
+            masks=observation.masks[:count],
+        )
+        timings["search"] = time.perf_counter() - started
+        intervals = history["intervals"]
+        details["search"] = {k: v for k, v in history.items() if k not in ("rounds", "intervals")}
+        details["search"]["rollouts"] = len(history["rounds"])
+    if refine_steps:
+        from .refine import refine as gradient_refine
+
+        started = time.perf_counter()
+        asset, history = gradient_refine(
             asset,
             observation,
             refine_steps,
@@ -297,7 +331,7 @@ def predict_observation(
         details["refine"] = history
     if truth is not None:
         details["truth"] = truth.attributes
-    return PredictResult(asset, observation, attributes, timings, details)
+    return PredictResult(asset, observation, attributes, timings, details, intervals)
 
 
 def write_outputs(
@@ -320,7 +354,8 @@ def write_outputs(
     out = check_new_output(out, overwrite)
     with atomic_folder(out, overwrite=True) as staging:
         started = time.perf_counter()
-        write_asset(result.asset, staging, overwrite=True)
+        notes = {"intervals": result.intervals, "intervals_how": result.summary()["intervals_how"]}
+        write_asset(result.asset, staging, overwrite=True, notes=notes)
         result.timings["write"] = time.perf_counter() - started
         if preview_frames > 0:
             started = time.perf_counter()

@@ -1,14 +1,25 @@
-"""Gradient-free refinement: fit the observables to a recording by batched re-simulation.
+"""Gradient-free refinement: fit the observables to a recording by batched re-simulation, and say
+how well the recording pins each of them down.
 
 Only k/m, d/m and the friction are observable (docs/design.md#identifiability), so the search moves
-those three and keeps the mass. It is a coordinate search: for each span (coarse to fine) and each
-observable, ``candidates`` values around the current one (the other two fixed) are simulated as
-one batch from the asset's initial state, rendered into the recording's camera and compared with
-frames 1..T−1 by mean squared error; the best is kept. Each round is one batched rollout and one
-batched render, so a whole search (3 spans × 3 observables × 7 candidates = 63 rollouts) costs a
-few seconds at 32 px and 256 anchors on two cores (docs/training.md "Refinement by batched
-search"), against minutes for gradient steps, and it needs no gradient through contact, which is
-what moves friction. The photometric error of every candidate is kept in the history.
+those three; the mass only follows where a ratio could not be reached with the predicted mass
+inside the attribute ranges (:func:`attributes_of`). Two stages, each a few batched rollouts:
+
+1. **Coordinate search**: for each span (coarse to fine) and each observable, ``candidates`` values
+   around the current one (the other two fixed) are simulated as one batch from the asset's
+   initial state, rendered into the recording's camera and compared with frames 1..T−1 by mean
+   squared error; the best is kept.
+2. **Profiles**: for each observable, a grid over its whole range plus a fine grid around the best
+   (the other two at their best) — a wrong network start far from the truth is caught here, and
+   the profile gives the interval: a posterior ∝ exp(−(E − E_min) / (τ·E_min)) over the profile,
+   i.e. Gaussian pixel noise whose variance is the best fit's residual, with τ = 2 / (effective
+   number of independent pixels) calibrated once on training objects (:data:`TEMPERATURE`). An
+   observable the video does not show (the friction of an object that never slides) has a flat
+   profile and comes out as a wide interval.
+
+Each round is one batched rollout and one batched render, so a whole search costs seconds at 64 px
+and 256 anchors on two cores (docs/training.md "Refinement by batched search"), against minutes
+for gradient steps, and it needs no gradient through contact, which is what moves friction.
 """
 
 from __future__ import annotations
@@ -23,7 +34,7 @@ from torch import Tensor
 
 from ..assets.asset import Asset
 from ..capture import CameraSpec
-from ..physics import SpringMassModel, State, deform_means, rollout, stable_substeps
+from ..physics import SpringMassModel, State, deform_means, rollout, scene_stable_substeps
 from ..physics.model import ATTRIBUTE_RANGES
 from ..render import render
 
@@ -35,6 +46,14 @@ MIN_SUBSTEPS = 25  # as the cpu_small training recipe and pipeline/refine.py
 # video does not show an observable (all errors alike), the start is kept, not a grid end.
 TIE = 1e-6
 OBSERVABLES = ("log_k_over_m", "log_d_over_m", "friction")
+PROFILE_POINTS = 9  # evenly over each observable's range
+PROFILE_LOCAL = (-1.0, -0.5, -0.2, 0.2, 0.5, 1.0)  # × the last span, around the best
+# Temperature of the profile posterior, relative to the best error (τ = 2 / effective independent
+# pixels). Calibrated by ``benchmarks/search_refinement.py --calibrate`` on the training objects
+# of a pybullet-mesh dataset (not its test objects): the τ whose 10–90 % intervals cover the truth
+# on 80 % of (sample, observable) pairs; docs/training.md "Intervals".
+TEMPERATURE = 1.2
+QUANTILES = (0.1, 0.9)
 
 
 def observables(physics) -> Tensor:  # [3] (log k/m, log d/m, f)
@@ -48,15 +67,76 @@ def observables(physics) -> Tensor:  # [3] (log k/m, log d/m, f)
     )
 
 
+def observable_bounds() -> Tensor:  # [3, 2] the reachable (lo, hi) of each observable
+    """Inside the attribute ranges: k/m from k_lo/m_hi to k_hi/m_lo, and so on."""
+    r = ATTRIBUTE_RANGES
+    (m_lo, m_hi), (k_lo, k_hi), (d_lo, d_hi) = r["mass"], r["stiffness"], r["damping"]
+    return torch.tensor(
+        [
+            [math.log(k_lo / m_hi), math.log(k_hi / m_lo)],
+            [math.log(d_lo / m_hi), math.log(d_hi / m_lo)],
+            list(r["friction"]),
+        ],
+        dtype=torch.float64,
+    )
+
+
 def attributes_of(values: Tensor, mass: float) -> dict[str, Tensor]:
-    """(log k/m, log d/m, f) [B, 3] → stiffness, damping, friction [B], inside the attribute ranges
-    (the mass is kept: only the ratios are observable)."""
-    ranges = ATTRIBUTE_RANGES
+    """(log k/m, log d/m, f) [B, 3] → mass, stiffness, damping, friction [B] inside the attribute
+    ranges. The mass is kept unless a ratio needs another one (k/m = 3000 with a 1-kg prediction):
+    then the nearest mass that holds both ratios inside the ranges (any mass gives the same
+    motion, docs/design.md#identifiability); where none does, k and d are clamped."""
+    r = ATTRIBUTE_RANGES
+    k_over_m, d_over_m = values[:, 0].exp(), values[:, 1].exp()
+    lowest = torch.stack(
+        [torch.full_like(k_over_m, r["mass"][0]), r["stiffness"][0] / k_over_m,
+         r["damping"][0] / d_over_m]
+    ).amax(0)  # fmt: skip
+    highest = torch.stack(
+        [torch.full_like(k_over_m, r["mass"][1]), r["stiffness"][1] / k_over_m,
+         r["damping"][1] / d_over_m]
+    ).amin(0)  # fmt: skip
+    fits = lowest <= highest
+    held = torch.where(fits, torch.maximum(torch.minimum(torch.full_like(lowest, mass), highest),
+                                           lowest), torch.full_like(lowest, mass))  # fmt: skip
     return {
-        "stiffness": (values[:, 0].exp() * mass).clamp(*ranges["stiffness"]),
-        "damping": (values[:, 1].exp() * mass).clamp(*ranges["damping"]),
-        "friction": values[:, 2].clamp(0.0, 1.0),
+        "mass": held,
+        "stiffness": (k_over_m * held).clamp(*r["stiffness"]),
+        "damping": (d_over_m * held).clamp(*r["damping"]),
+        "friction": values[:, 2].clamp(*r["friction"]),
     }
+
+
+def _candidate_model(asset: Asset, values: dict[str, Tensor]) -> SpringMassModel:
+    physics = asset.physics
+    return SpringMassModel(
+        asset.springs,
+        asset.rest_length,
+        values["mass"].float(),
+        values["stiffness"].float(),
+        values["damping"].float(),
+        values["friction"].float(),
+        spring_exponent=physics.spring_exponent,
+        restitution=physics.restitution,
+        gravity=tuple(physics.gravity),
+        ground_height=physics.ground_height,
+    )
+
+
+SUBSTEP_GROUP_RATIO = 1.5  # candidates whose stable substeps differ less than this share a rollout
+
+
+def substep_groups(need: list[int], ratio: float = SUBSTEP_GROUP_RATIO) -> list[list[int]]:
+    """Candidate indices grouped by the substeps they need (sorted; within a group the largest is
+    < ``ratio`` × the smallest): a stiff candidate does not make the whole batch take its steps."""
+    order = sorted(range(len(need)), key=need.__getitem__)
+    groups = [[order[0]]]
+    for b in order[1:]:
+        if need[b] < ratio * need[groups[-1][0]]:
+            groups[-1].append(b)
+        else:
+            groups.append([b])
+    return groups
 
 
 @torch.no_grad()
@@ -67,32 +147,99 @@ def photometric_errors(
     candidates: Tensor,  # [B, 3] (log k/m, log d/m, f)
     min_substeps: int = MIN_SUBSTEPS,
 ) -> Tensor:  # [B] mean squared error over frames 1..T−1
-    """Simulate the asset with each candidate's attributes (mass kept) and score its video."""
+    """Simulate the asset with each candidate's observables and score its video."""
     count, physics = len(candidates), asset.physics
     values = attributes_of(candidates, physics.mass)
-    model = SpringMassModel(
-        asset.springs,
-        asset.rest_length,
-        torch.full((count,), physics.mass),
-        values["stiffness"].float(),
-        values["damping"].float(),
-        values["friction"].float(),
-        spring_exponent=physics.spring_exponent,
-        restitution=physics.restitution,
-        gravity=tuple(physics.gravity),
-        ground_height=physics.ground_height,
-    )
-    x0 = asset.x0[None].expand(count, -1, -1)
-    substeps = stable_substeps(model, x0, physics.frame_dt, min_substeps)
-    state = State(x0, asset.v0[None].expand(count, -1, -1))
     steps = frames.shape[0] - 1
-    trajectory = rollout(model, state, steps, physics.frame_dt, substeps=substeps)
-    x = trajectory.x[:, 1:].reshape(count * steps, -1, 3)  # [B·(T−1), N_A, 3]
+    x0 = asset.x0[None].expand(count, -1, -1)
+    need = scene_stable_substeps(
+        _candidate_model(asset, values), x0, physics.frame_dt, min_substeps
+    )
+    need = need * count if len(need) == 1 else need
+    x = x0.new_empty(count, steps + 1, *x0.shape[1:])
+    for group in substep_groups(need):
+        index = torch.tensor(group)
+        model = _candidate_model(asset, {n: v[index] for n, v in values.items()})
+        state = State(x0[index], asset.v0[None].expand(len(group), -1, -1))
+        substeps = max(need[b] for b in group)
+        x[index] = rollout(model, state, steps, physics.frame_dt, substeps=substeps).x
+    x = x[:, 1:].reshape(count * steps, -1, 3)  # [B·(T−1), N_A, 3]
     g = asset.gaussians
     means = deform_means(g.means, asset.x0[None], x, asset.binding_index, asset.binding_weight)
     batch = g.map(lambda t: t.expand(len(x), *t.shape)).with_means(means)
     images = render(batch, camera.cameras()).rgb[:, 0].reshape(count, steps, *frames.shape[1:])
     return ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
+
+
+def profile_interval(
+    values: Tensor,  # [P] grid along one observable (any order)
+    errors: Tensor,  # [P] the photometric error at each
+    bounds: tuple[float, float],  # the observable's reachable range
+    temperature: float = TEMPERATURE,
+    quantiles: tuple[float, float] = QUANTILES,
+    points: int = 512,
+) -> tuple[float, float]:
+    """The (lo, hi) quantiles of the posterior ∝ exp(−(E − E_min) / (τ·E_min)) along a profile,
+    with E interpolated linearly between the grid values and held flat beyond them, and a flat
+    prior over ``bounds``. A flat profile gives the prior's quantiles; a sharp one, a narrow
+    interval around its minimum."""
+    order = values.argsort()
+    v, e = values[order].double(), errors[order].double()
+    line = torch.linspace(bounds[0], bounds[1], points, dtype=torch.float64)
+    index = torch.searchsorted(v, line).clamp(1, len(v) - 1)
+    left, right = v[index - 1], v[index]
+    share = ((line - left) / (right - left).clamp_min(1e-12)).clamp(0.0, 1.0)
+    energy = e[index - 1] + share * (e[index] - e[index - 1])
+    best = float(e.min())
+    scale = temperature * max(best, 1e-12)
+    weight = torch.exp(-(energy - energy.min()) / scale)
+    cdf = weight.cumsum(0) / weight.sum()
+    lo = float(line[int(torch.searchsorted(cdf, torch.tensor(quantiles[0], dtype=cdf.dtype)))])
+    hi_index = min(int(torch.searchsorted(cdf, torch.tensor(quantiles[1], dtype=cdf.dtype))),
+                   points - 1)  # fmt: skip
+    return lo, float(line[hi_index])
+
+
+CROP_MARGIN = 0.25  # the window around the object: its masks' box grown by this share a side
+
+
+def object_window(masks: Tensor, margin: float = CROP_MARGIN) -> tuple[int, int, int, int] | None:
+    """(left, top, width, height) in pixels of the box around every frame's mask [T, H, W] grown
+    by ``margin`` of its size on each side (at least 2 px), inside the image; None when no mask
+    has a pixel."""
+    seen = masks.detach().reshape(-1, *masks.shape[-2:]).amax(0) > 0.5  # [H, W]
+    rows, cols = seen.any(1).nonzero(), seen.any(0).nonzero()
+    if len(rows) == 0:
+        return None
+    height, width = seen.shape
+    top, bottom, left, right = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    grow_y = max(2, math.ceil(margin * (bottom - top)))
+    grow_x = max(2, math.ceil(margin * (right - left)))
+    top, bottom = max(0, top - grow_y), min(height, bottom + grow_y)
+    left, right = max(0, left - grow_x), min(width, right + grow_x)
+    return left, top, right - left, bottom - top
+
+
+def comparison_view(
+    frames: Tensor,  # [T, H, W, 3]
+    camera: CameraSpec,
+    resolution: int,
+    window: tuple[int, int, int, int] | None = None,  # (left, top, width, height) pixels
+) -> tuple[Tensor, CameraSpec]:
+    """The frames the search compares with, and their camera: cropped to ``window`` (the object's
+    region: background pixels cost rendering and tell nothing), then area-averaged down so the
+    longest side is at most ``resolution`` (never up)."""
+    if window is not None:
+        left, top, width, height = window
+        frames = frames[:, top : top + height, left : left + width]
+        camera = camera.cropped(left, top, width, height)
+    height, width = frames.shape[1:3]
+    scale = min(1.0, resolution / max(height, width))
+    size = (max(8, round(height * scale)), max(8, round(width * scale)))
+    if size != (height, width):
+        frames = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
+        frames = frames.permute(0, 2, 3, 1)
+    return frames, camera.resized(size[1], size[0])
 
 
 def search(
@@ -102,51 +249,99 @@ def search(
     resolution: int = 64,  # longest side of the comparison (frames are area-averaged down)
     spans: tuple[float, ...] = SPANS,
     candidates: int = CANDIDATES,
+    profiles: bool = True,  # stage 2: global check and intervals
+    temperature: float = TEMPERATURE,
+    masks: Tensor | None = None,  # [T, H, W] the object's masks: compare only around them
 ) -> tuple[Asset, dict]:
-    """Coordinate search from the asset's attributes → (asset with the best, history dict)."""
+    """Coordinate search from the asset's attributes, then profiles → (asset with the best, history
+    dict with ``intervals`` {observable: [lo, hi]} when ``profiles``)."""
     if frames.dim() != 4 or frames.shape[0] < 2 or frames.shape[-1] != 3:
         raise ValueError(f"frames: expected [T ≥ 2, H, W, 3], got {list(frames.shape)}")
     if candidates < 3 or candidates % 2 == 0:
         raise ValueError(f"candidates: expected an odd number ≥ 3, got {candidates}")
     started = time.perf_counter()
-    height, width = frames.shape[1:3]
-    scale = min(1.0, resolution / max(height, width))
-    size = (max(8, round(height * scale)), max(8, round(width * scale)))
-    if size != (height, width):
-        frames = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
-        frames = frames.permute(0, 2, 3, 1)
-    camera = camera.resized(size[1], size[0])
-    current = observables(asset.physics)
-    start = current.clone()
+    window = None if masks is None else object_window(masks)
+    frames, camera = comparison_view(frames, camera, resolution, window)
+    size = list(frames.shape[1:3])
+    bounds = observable_bounds()
+    start = observables(asset.physics)
+    current = torch.maximum(torch.minimum(start, bounds[:, 1]), bounds[:, 0])
     half = candidates // 2  # offsets −1..1 with an exact 0 at the centre (the current value)
     grid = torch.arange(-half, half + 1, dtype=torch.float64) / half
     rounds = []
     best_error = math.inf
-    for span in spans:
-        for i, name in enumerate(OBSERVABLES):
-            trial = current.repeat(candidates, 1)
-            half_width = span if i < 2 else span * FRICTION_SPAN_SCALE
-            trial[:, i] = current[i] + grid * half_width
-            trial[:, 2] = trial[:, 2].clamp(0.0, 1.0)
-            errors = photometric_errors(asset, frames, camera, trial)
-            pick = int(errors.argmin())
-            if not errors[pick] < errors[half] * (1.0 - TIE):
-                pick = half  # the current value: kept unless another is clearly better
-            current, best_error = trial[pick], float(errors[pick])
-            rounds.append(
-                {"observable": name, "values": trial[:, i].tolist(), "errors": errors.tolist()}
-            )
+
+    def scale_of(i: int) -> float:
+        return 1.0 if i < 2 else FRICTION_SPAN_SCALE
+
+    def step(i: int, offsets: Tensor, centre_at: int) -> tuple[Tensor, Tensor]:
+        """Try ``current`` with observable i moved by ``offsets`` (``offsets[centre_at]`` = 0);
+        keep the best → (the values tried, their errors)."""
+        nonlocal current, best_error
+        trial = current.repeat(len(offsets), 1)
+        trial[:, i] = (current[i] + offsets).clamp(*bounds[i].tolist())
+        errors = photometric_errors(asset, frames, camera, trial)
+        pick = int(errors.argmin())
+        if not errors[pick] < errors[centre_at] * (1.0 - TIE):
+            pick = centre_at  # the current value: kept unless another is clearly better
+        current, best_error = trial[pick].clone(), float(errors[pick])
+        rounds.append(
+            {
+                "observable": OBSERVABLES[i],
+                "values": trial[:, i].tolist(),
+                "errors": errors.tolist(),
+            }
+        )
+        return trial[:, i], errors
+
+    def coordinate_search(spans_now):
+        for span in spans_now:
+            for i in range(3):
+                step(i, grid * span * scale_of(i), centre_at=half)
+
+    def profile_pass() -> tuple[bool, list[tuple[Tensor, Tensor]]]:
+        """One profile per observable (the others at their best); True if one moved the best."""
+        local = torch.tensor(PROFILE_LOCAL, dtype=torch.float64) * spans[-1]
+        before, found = current.clone(), []
+        for i in range(3):
+            wide = torch.linspace(*bounds[i].tolist(), PROFILE_POINTS, dtype=torch.float64)
+            zero = torch.zeros(1, dtype=torch.float64)
+            found.append(step(i, torch.cat([zero, local * scale_of(i), wide - current[i]]), 0))
+        return bool((current != before).any()), found
+
+    coordinate_search(spans)
+    intervals, profile = None, None
+    if profiles:
+        moved, found = profile_pass()
+        if moved:  # a better basin than the start's: search it finely, profile again
+            coordinate_search(spans[1:])
+            moved, found = profile_pass()
+        intervals = {
+            name: list(profile_interval(v, e, tuple(bounds[i].tolist()), temperature))
+            for i, (name, (v, e)) in enumerate(zip(OBSERVABLES, found, strict=True))
+        }
+        profile = {
+            name: {"values": v.tolist(), "errors": e.tolist()}
+            for name, (v, e) in zip(OBSERVABLES, found, strict=True)
+        }
     # only what moved: exp(log(k/m))·m would not give back k to the last bit
-    values = attributes_of(current[None], asset.physics.mass)
-    names = ("stiffness", "damping", "friction")
-    found = {name: float(values[name][0]) for i, name in enumerate(names) if current[i] != start[i]}
+    best = {n: float(v[0]) for n, v in attributes_of(current[None], asset.physics.mass).items()}
+    moved = (current != start).tolist()
+    mass_moved = best["mass"] != asset.physics.mass
+    changed = {"mass": mass_moved, "stiffness": moved[0] or mass_moved,
+               "damping": moved[1] or mass_moved, "friction": moved[2]}  # fmt: skip
+    found = {name: best[name] for name, yes in changed.items() if yes}
     history = {
-        "method": "coordinate search (pipeline/search.py)",
+        "method": "coordinate search + profiles (pipeline/search.py)",
         "start": dict(zip(OBSERVABLES, start.tolist(), strict=True)),
         "found": dict(zip(OBSERVABLES, current.tolist(), strict=True)),
         "error": best_error,
+        "intervals": intervals,  # 10–90 % of the profile posterior (natural logs of SI ratios)
+        "profiles": profile,  # the last profile of each observable
+        "temperature": temperature,
         "rounds": rounds,
-        "render_size": list(size),
+        "render_size": size,
+        "window": window,  # (left, top, width, height) of the recording compared; None: all
         "seconds": round(time.perf_counter() - started, 2),
     }
     return replace(asset, physics=replace(asset.physics, **found)), history

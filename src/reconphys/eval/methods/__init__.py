@@ -11,7 +11,9 @@
 - ``reconphys_search``: ``reconphys``, then log k/m, log d/m and f fitted to the video by batched
   re-simulation (:mod:`reconphys.pipeline.search`; upper bound on geometry);
 - ``reconphys_ff``: the whole feed-forward pipeline (3DGS predictor + physics predictor, estimated
-  initial velocity): what ``predict VIDEO`` does without a PLY.
+  initial velocity): what ``predict VIDEO --no-refine`` does without a PLY;
+- ``reconphys_video``: ``reconphys_ff`` then the search, with intervals: ``predict VIDEO``'s
+  default path.
 
 A new method (the project's model, next issues) subclasses :class:`Method` and is added to
 ``METHODS``; nothing else changes.
@@ -24,7 +26,7 @@ from .appearance import AppearanceMethod
 from .base import FITTED_GEOMETRY, GROUND_TRUTH_GEOMETRY, Method, MethodOptions, Prediction
 from .oracle import OracleMethod
 from .reconphys import ReconPhysMethod
-from .reconphys_ff import ReconPhysFeedForwardMethod
+from .reconphys_ff import ReconPhysFeedForwardMethod, ReconPhysVideoMethod
 from .reconphys_search import ReconPhysSearchMethod
 from .springgaus import SpringGausMethod, SpringGausTruthMethod
 from .trivial import TrivialMethod
@@ -38,6 +40,7 @@ METHODS: dict[str, type[Method]] = {
     "reconphys": ReconPhysMethod,
     "reconphys_search": ReconPhysSearchMethod,
     "reconphys_ff": ReconPhysFeedForwardMethod,
+    "reconphys_video": ReconPhysVideoMethod,
 }
 
 

@@ -30,6 +30,8 @@ class Prediction:
     means: Tensor | None = None  # ...and their centres per fitted frame [T_fit, N, 3], metres
     initial_guess: Asset | None = None  # the method's starting asset, evaluated beside it
     info: dict = field(default_factory=dict)  # diagnostics (iterations, losses) for the CSVs
+    # 10–90 % intervals {log_k_over_m, log_d_over_m, friction: [lo, hi]} (methods that give them)
+    intervals: dict[str, list[float]] | None = None
     reused_seconds: float = 0.0  # work done earlier by another method (a shared fit) that
     # counts in this method's time: the evaluator adds it to the measured predict time
 

@@ -4,8 +4,9 @@ Frame 0 of the physics model's view goes through the 3DGS predictor (its Gaussia
 object's pixels, placed with the known camera), frames 0–19 through the physics predictor; the
 asset is built from the predicted Gaussians (anchors, springs, binding) with the initial linear
 velocity estimated from the masks (no spin), exactly as :func:`reconphys.pipeline.predict`
-does for a user's video. Nothing of the ground truth is used: compare it with ``reconphys``
-(same attributes, true geometry and initial state: an upper bound) and ``springgaus``.
+does for a user's video with ``--no-refine``. Nothing of the ground truth is used: compare it with
+``reconphys`` (same attributes, true geometry and initial state: an upper bound) and
+``springgaus``. ``reconphys_video`` adds the search, as ``predict VIDEO`` does by default.
 
 The 3DGS predictor: ``$RECONPHYS_GS_MODEL`` or the shipped one (see
 :mod:`reconphys.models.gaussian_shipped`).
@@ -25,6 +26,7 @@ class ReconPhysFeedForwardMethod(Method):
     name = "reconphys_ff"
     description = "the feed-forward pipeline: predicted Gaussians (frame 0) + predicted physics"
     geometry = PREDICTED_GEOMETRY
+    refine = False  # predict's search after the network (--no-refine: False)
 
     def __init__(self, options: MethodOptions):
         super().__init__(options)
@@ -41,7 +43,20 @@ class ReconPhysFeedForwardMethod(Method):
             f"{sample.id} view {view}",
         )
         result = predict_observation(
-            observation, self.predictor, geometry="predicted", gs_model=self.gs_predictor
+            observation,
+            self.predictor,
+            geometry="predicted",
+            gs_model=self.gs_predictor,
+            refine=self.refine,
         )
         info = {"gaussians": result.asset.gaussians.num_gaussians, **result.timings}
-        return Prediction(asset=result.asset, info=info)
+        return Prediction(asset=result.asset, info=info, intervals=result.intervals)
+
+
+class ReconPhysVideoMethod(ReconPhysFeedForwardMethod):
+    """``predict VIDEO``'s default path: the feed-forward pipeline, then the search of k/m, d/m
+    and f on the predicted geometry (:mod:`reconphys.pipeline.search`), with its intervals."""
+
+    name = "reconphys_video"
+    description = "predict's default path: predicted Gaussians + predicted physics + search"
+    refine = True
