@@ -88,6 +88,9 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     assert list(intervals) == ["log_k_over_m", "log_d_over_m", "friction"]
     assert all(low <= high for low, high in intervals.values())
     assert "search:" in result.output and "10–90 %" in result.output
+    sheet = imageio.imread(out / "preview.png")  # frames above, the intervals written below
+    caption = sheet[-3 * 12 :]
+    assert caption.max() > 200 and (caption == 0).mean() > 0.8  # white text on black
     preview = imageio.mimread(out / "preview.mp4")
     assert len(preview) == 30  # at least the observed frames
     assert preview[0].shape[1] > 2 * preview[0].shape[0]  # observed | simulated side by side

@@ -188,7 +188,13 @@ def test_a_clip_that_ends_before_the_contact_shows_no_observable(sample):
     contact = int((heights <= truth.asset.physics.ground_height + 1e-3).nonzero()[0])
     assert contact >= 3, contact
     frames = observation.frames[:contact]  # frames before the first contact
-    _, history = search(truth.asset, frames, observation.camera, spans=(0.25,))
+    wrong = replace(
+        truth.asset.physics, friction=0.9, stiffness=min(1200.0, 3 * truth.asset.physics.stiffness)
+    )
+    found, history = search(replace(truth.asset, physics=wrong), frames, observation.camera,
+                            spans=(0.25,))  # fmt: skip
+    assert history["undetermined"] == ["log_k_over_m", "log_d_over_m", "friction"]
+    assert found.physics == wrong  # nothing shown, nothing moved: the start is kept
     bounds = observable_bounds()
     for i, (name, (low, high)) in enumerate(history["intervals"].items()):
         prior = 0.8 * float(bounds[i, 1] - bounds[i, 0])

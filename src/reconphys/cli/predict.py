@@ -116,8 +116,10 @@ def predict_command(
     intervals = summary["intervals"]
     if intervals:
         s = summary["search"]
+        kept = "  not shown by the recording: the network's value kept"
         lines = [
             f"  {name:<13} {summary['observables'][name]:7.3f}   [{lo:7.3f}, {hi:7.3f}]"
+            + (kept if name in s["undetermined"] else "")
             for name, (lo, hi) in intervals.items()
         ]
         typer.echo(

@@ -349,7 +349,13 @@ def write_outputs(
     from ..assets.asset import write_asset
     from ..io import atomic_folder, check_new_output
     from ..render.video import write_image, write_mp4
-    from .preview import contact_sheet, side_by_side, simulate_and_render
+    from .preview import (
+        contact_sheet,
+        interval_lines,
+        side_by_side,
+        simulate_and_render,
+        with_caption,
+    )
 
     out = check_new_output(out, overwrite)
     with atomic_folder(out, overwrite=True) as staging:
@@ -364,7 +370,10 @@ def write_outputs(
             video = side_by_side(result.observation.frames, simulated)
             write_mp4(staging / "preview.mp4", video, fps=1.0 / result.asset.physics.frame_dt)
             observed = result.observation.frames
-            write_image(staging / "preview.png", contact_sheet(observed, simulated))
+            sheet = contact_sheet(observed, simulated)
+            summary = result.summary()
+            caption = interval_lines(summary["observables"], summary["intervals"])
+            write_image(staging / "preview.png", with_caption(sheet, caption))
             result.timings["preview"] = time.perf_counter() - started
         summary = result.summary()
         (staging / "prediction.json").write_text(json.dumps(summary, indent=2) + "\n")

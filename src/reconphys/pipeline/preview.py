@@ -76,3 +76,27 @@ def side_by_side(
     left, right = _enlarge(left, factor), _enlarge(simulated, factor)
     bar = torch.full((num_frames, left.shape[1], SEPARATOR, 3), 0.5)
     return to_uint8(torch.cat([left, bar, right], dim=2))
+
+
+def with_caption(image: np.ndarray, lines: list[str]) -> np.ndarray:  # [H, W, 3] → [H + h, W, 3]
+    """The image with ``lines`` of white text on a black strip below it (PIL's built-in font)."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    font = ImageFont.load_default()
+    line_height = 12
+    strip = Image.new("RGB", (image.shape[1], 4 + line_height * len(lines)), (0, 0, 0))
+    draw = ImageDraw.Draw(strip)
+    for i, line in enumerate(lines):
+        draw.text((4, 2 + line_height * i), line, fill=(255, 255, 255), font=font)
+    return np.concatenate([image, np.asarray(strip, dtype=np.uint8)], axis=0)
+
+
+def interval_lines(observables: dict[str, float], intervals: dict | None) -> list[str]:
+    """The preview's caption: each observable with its 10–90 % interval (or why there is none)."""
+    if not intervals:
+        return ["feed-forward only (--no-refine): no intervals"]
+    names = {"log_k_over_m": "log k/m", "log_d_over_m": "log d/m", "friction": "friction"}
+    return [
+        f"{names[key]} {observables[key]:.2f}  [{low:.2f}, {high:.2f}] (10-90 %)"
+        for key, (low, high) in intervals.items()
+    ]

@@ -15,7 +15,8 @@ inside the attribute ranges (:func:`attributes_of`). Two stages, each a few batc
    i.e. Gaussian pixel noise whose variance is the best fit's residual, with τ = 2 / (effective
    number of independent pixels) calibrated once on training objects (:data:`TEMPERATURE`). An
    observable the video does not show (the friction of an object that never slides) has a flat
-   profile and comes out as a wide interval.
+   profile and comes out as a wide interval; when it is nearly the prior's (:data:`UNDETERMINED`),
+   the start value is kept for it instead of a best fit that is noise.
 
 Each round is one batched rollout and one batched render, so a whole search costs seconds at 64 px
 and 256 anchors on two cores (docs/training.md "Refinement by batched search"), against minutes
@@ -54,6 +55,10 @@ PROFILE_LOCAL = (-1.0, -0.5, -0.2, 0.2, 0.5, 1.0)  # × the last span, around th
 # on 80 % of (sample, observable) pairs; docs/training.md "Intervals".
 TEMPERATURE = 1.2
 QUANTILES = (0.1, 0.9)
+# An observable whose interval is at least this share of the prior's own 10–90 % width is not
+# shown by the recording: its best fit is noise (or a wrong geometry compensating), so the start
+# (the network's value) is kept for it and the history lists it under "undetermined".
+UNDETERMINED = 0.75
 
 
 def observables(physics) -> Tensor:  # [3] (log k/m, log d/m, f)
@@ -310,7 +315,7 @@ def search(
         return bool((current != before).any()), found
 
     coordinate_search(spans)
-    intervals, profile = None, None
+    intervals, profile, undetermined = None, None, []
     if profiles:
         moved, found = profile_pass()
         if moved:  # a better basin than the start's: search it finely, profile again
@@ -320,6 +325,11 @@ def search(
             name: list(profile_interval(v, e, tuple(bounds[i].tolist()), temperature))
             for i, (name, (v, e)) in enumerate(zip(OBSERVABLES, found, strict=True))
         }
+        prior_width = (QUANTILES[1] - QUANTILES[0]) * (bounds[:, 1] - bounds[:, 0])
+        for i, (low, high) in enumerate(intervals.values()):
+            if high - low >= UNDETERMINED * float(prior_width[i]):
+                undetermined.append(OBSERVABLES[i])
+                current[i] = start[i]
         profile = {
             name: {"values": v.tolist(), "errors": e.tolist()}
             for name, (v, e) in zip(OBSERVABLES, found, strict=True)
@@ -337,6 +347,7 @@ def search(
         "found": dict(zip(OBSERVABLES, current.tolist(), strict=True)),
         "error": best_error,
         "intervals": intervals,  # 10–90 % of the profile posterior (natural logs of SI ratios)
+        "undetermined": undetermined,  # observables the recording does not show: start kept
         "profiles": profile,  # the last profile of each observable
         "temperature": temperature,
         "rounds": rounds,
