@@ -99,6 +99,14 @@ def test_feed_forward_method_uses_no_ground_truth(dataset, model_path, tmp_path,
     assert asset.gaussians.num_gaussians <= 16 * 16  # one per object pixel of the 16-px view
     assert asset.gaussians.num_gaussians != truth.gaussians.num_gaussians
     assert not torch.equal(asset.v0, truth.v0)  # estimated, not the truth
+    assert prediction.intervals is None  # the network alone gives none
+
+    video = METHODS["reconphys_video"](options)  # predict's default: then the search
+    assert not video.uses_ground_truth
+    searched = video.predict(sample)
+    assert set(searched.intervals) == {"log_k_over_m", "log_d_over_m", "friction"}
+    assert torch.equal(searched.asset.x0, asset.x0)  # the same predicted geometry
+    assert searched.info["search"] > 0  # predict's timing of the search
 
 
 def test_evaluate_command_reports_reconphys_beside_trivial(dataset, model_path, tmp_path):
