@@ -13,11 +13,13 @@ attributes of the appearance baseline) are ``None`` here and ``null`` in metrics
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import torch
 
 from ..physics import ATTRIBUTES
+from ..pipeline.search import OBSERVABLES, observables
 from .evaluate import INITIAL_SUFFIX, INPUT_FRAMES, Results, Row, SampleResult
 from .metrics import attribute_errors
 
@@ -70,29 +72,17 @@ def attribute_mae(results: list[SampleResult]) -> dict[str, float | None]:
     return {key: errors[key] for key in ATTRIBUTE_KEYS}
 
 
-INTERVAL_KEYS = ("log_k_over_m", "log_d_over_m", "friction")
-
-
-def true_observables(attributes: dict[str, float]) -> dict[str, float]:
-    """log(k/m), log(d/m) (natural logs of the SI ratios) and friction of an attribute dict."""
-    return {
-        "log_k_over_m": math.log(attributes["stiffness"] / attributes["mass"]),
-        "log_d_over_m": math.log(attributes["damping"] / attributes["mass"]),
-        "friction": attributes["friction"],
-    }
-
-
 def interval_summary(results: list[SampleResult]) -> dict | None:
     """Per observable: the share of samples whose 10–90 % interval holds the truth (a calibrated
     method: about 0.8) and the intervals' mean width; None when the method gives no intervals."""
     have = [r for r in results if r.intervals is not None and r.failure is None]
     if not have:
         return None
+    truths = [observables(SimpleNamespace(**r.true_attributes)).tolist() for r in have]
     out = {}
-    for key in INTERVAL_KEYS:
-        truth = [true_observables(r.true_attributes)[key] for r in have]
+    for i, key in enumerate(OBSERVABLES):
         bounds = [r.intervals[key] for r in have]
-        inside = [lo <= t <= hi for t, (lo, hi) in zip(truth, bounds, strict=True)]
+        inside = [lo <= t[i] <= hi for t, (lo, hi) in zip(truths, bounds, strict=True)]
         out[key] = {
             "coverage": float(np.mean(inside)),
             "mean_width": float(np.mean([hi - lo for lo, hi in bounds])),

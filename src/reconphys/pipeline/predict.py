@@ -60,13 +60,21 @@ class PredictResult:
     # ratios; friction) from the search's profiles; None without the search (--no-refine)
     intervals: dict[str, list[float]] | None = None
 
+    @property
+    def observables(self) -> dict[str, float]:  # log_k_over_m, log_d_over_m, friction
+        return dict(zip(OBSERVABLES, observables(self.asset.physics).tolist(), strict=True))
+
+    @property
+    def intervals_how(self) -> str:
+        return INTERVALS_HOW if self.intervals else NO_INTERVALS
+
     def summary(self) -> dict:
         physics = self.asset.physics
         return {
             "attributes": {n: getattr(physics, n) for n in ATTRIBUTES},
-            "observables": dict(zip(OBSERVABLES, observables(physics).tolist(), strict=True)),
+            "observables": self.observables,
             "intervals": self.intervals,
-            "intervals_how": INTERVALS_HOW if self.intervals else NO_INTERVALS,
+            "intervals_how": self.intervals_how,
             "feed_forward": self.attributes,
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             **self.details,
@@ -360,7 +368,7 @@ def write_outputs(
     out = check_new_output(out, overwrite)
     with atomic_folder(out, overwrite=True) as staging:
         started = time.perf_counter()
-        notes = {"intervals": result.intervals, "intervals_how": result.summary()["intervals_how"]}
+        notes = {"intervals": result.intervals, "intervals_how": result.intervals_how}
         write_asset(result.asset, staging, overwrite=True, notes=notes)
         result.timings["write"] = time.perf_counter() - started
         if preview_frames > 0:
@@ -371,8 +379,7 @@ def write_outputs(
             write_mp4(staging / "preview.mp4", video, fps=1.0 / result.asset.physics.frame_dt)
             observed = result.observation.frames
             sheet = contact_sheet(observed, simulated)
-            summary = result.summary()
-            caption = interval_lines(summary["observables"], summary["intervals"])
+            caption = interval_lines(result.observables, result.intervals)
             write_image(staging / "preview.png", with_caption(sheet, caption))
             result.timings["preview"] = time.perf_counter() - started
         summary = result.summary()

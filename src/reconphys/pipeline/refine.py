@@ -15,12 +15,12 @@ import time
 from dataclasses import replace
 
 import torch
-import torch.nn.functional as F
 
 from ..assets.asset import Asset
 from ..capture import Observation
 from ..physics.model import ATTRIBUTE_RANGES
 from ..render.photometric import SceneBatch, photometric_loss
+from .search import comparison_view
 
 REFINE_LR = 0.05  # Adam step in log k, log d and logit f
 MIN_SUBSTEPS = 25  # as the cpu_small training recipe (configs/cpu_small.toml)
@@ -42,14 +42,8 @@ def refine(
 ) -> tuple[Asset, dict]:
     """``steps`` Adam steps → (asset with the best attributes, history dict)."""
     frames = observation.frames[:num_frames]  # [T, H, W, 3]
-    height, width = frames.shape[1:3]
-    scale = min(1.0, resolution / max(height, width))
-    size = (max(8, round(height * scale)), max(8, round(width * scale)))
-    if size != (height, width):
-        frames = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area").permute(
-            0, 2, 3, 1
-        )
-    camera = observation.camera.resized(size[1], size[0])
+    frames, camera = comparison_view(frames, observation.camera, resolution)
+    size = frames.shape[1:3]
     cameras = camera.cameras()
     scenes = SceneBatch.from_assets([asset])
     physics = asset.physics
