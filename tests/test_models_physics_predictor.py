@@ -185,3 +185,66 @@ def test_motion_option_feeds_the_encoder_and_loads_old_configs():
     assert PredictorConfig.from_dict(legacy).motion is False
     with pytest.raises(ValueError, match="motion"):
         PhysicsPredictor(PredictorConfig(**{**TINY.to_dict(), "motion": True, "encoder": "timm"}))
+
+
+# --- the track network ------------------------------------------------------------------------
+
+TRACK = PredictorConfig(inputs="track", track_channels=16, mlp_hidden=(32,), num_frames=8)
+
+
+def _sliding_square(distances: torch.Tensor, frames: int = 8) -> torch.Tensor:
+    """[B, T, 32, 32, 3]: a 6-px grey square that slides ``distance`` pixels to the right over
+    the clip (sub-pixel positions by coverage at its left and right edges)."""
+    b = distances.shape[0]
+    x = torch.arange(32, dtype=torch.float32) + 0.5  # pixel centres
+    out = torch.zeros(b, frames, 32, 32, 3)
+    for t in range(frames):
+        left = 10.0 + distances * t / (frames - 1)  # [B]
+        right = (x[None] + 0.5).minimum(left[:, None] + 6)
+        coverage = (right - (x[None] - 0.5).maximum(left[:, None])).clamp(0, 1)
+        out[:, t, 12:18] = 0.6 * coverage[:, None, :, None]
+    return out
+
+
+def test_track_network_shapes_padding_and_old_configs():
+    torch.manual_seed(5)
+    model = PhysicsPredictor(TRACK).eval()
+    assert model.track is not None and not hasattr(model, "encoder")
+    clip = _sliding_square(torch.tensor([0.5, 2.0]))
+    out = model(clip)
+    assert out["unit"].shape == (2, 4) and ((out["unit"] > 0) & (out["unit"] < 1)).all()
+    short = model(clip[:, :5])["unit"]  # fewer frames than num_frames: padded, not refused
+    assert short.shape == (2, 4) and torch.isfinite(short).all()
+    with pytest.raises(ValueError, match="at most 8"):
+        model(torch.rand(1, 9, 32, 32, 3))
+    with pytest.raises(ValueError, match="inputs"):
+        PhysicsPredictor(PredictorConfig(inputs="pixels"))
+    legacy = {k: v for k, v in TINY.to_dict().items() if k not in ("inputs", "track_channels")}
+    assert PhysicsPredictor(PredictorConfig.from_dict(legacy)).track is None
+    loaded = PhysicsPredictor(PredictorConfig.from_dict(TRACK.to_dict()))
+    loaded.load_state_dict(model.state_dict())  # BatchNorm's statistics travel with the weights
+    torch.testing.assert_close(loaded.eval()(clip)["unit"], out["unit"])
+
+
+def test_track_network_learns_a_sub_pixel_slide():
+    """Regress how far a square slid (0–1.5 px at 32 px) from the track alone: after 150 Adam
+    steps on 64 clips its error on 40 others is under a third of the mean guess' — what a CNN
+    that strides to 4×4 maps cannot see, the coverage-weighted moments keep."""
+    torch.manual_seed(6)
+    model = PhysicsPredictor(TRACK)
+    optimizer = torch.optim.Adam(model.parameters(), 3e-3)
+    seen = torch.rand(64) * 1.5
+    clips = _sliding_square(seen)
+    for _ in range(150):
+        out = model(clips)
+        loss = (out["unit"][:, 3] - seen / 1.5).abs().mean()  # the friction output, in [0, 1]
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    model.eval()
+    distance = torch.linspace(0, 1.5, 40)
+    with torch.no_grad():
+        predicted = model(_sliding_square(distance))["unit"][:, 3] * 1.5
+    error = (predicted - distance).abs().mean()
+    trivial = (distance - distance.mean()).abs().mean()
+    assert error < trivial / 3, (float(error), float(trivial))

@@ -300,6 +300,37 @@ def test_all_views_makes_each_view_its_own_video(tmp_path):
     assert four.fingerprint() != one.fingerprint()  # a resumed run cannot switch silently
 
 
+def test_data_objects_keeps_the_first_objects_and_supervised_skips_assets(folder, tmp_path):
+    """data.objects = 1 keeps the samples of the split's first object only (a smaller training
+    set held out the same way); a supervised run builds no assets; a track network trains."""
+    every = TrainingSamples(tiny(tmp_path, f"data.source={folder}").data)
+    first = TrainingSamples(tiny(tmp_path, f"data.source={folder}", "data.objects=1").data)
+    objects = [s["object_dir"] for s in every.dataset.samples]
+    assert len(set(objects)) == 2 and len(first) == objects.count(objects[0]) < len(every)
+    assert {s["object_dir"] for s in first.dataset.samples} == {objects[0]}
+    assert first[0]["asset"] is not None
+    no_assets = TrainingSamples(tiny(tmp_path, f"data.source={folder}").data, assets=False)
+    assert no_assets[0]["asset"] is None
+    cached = TrainingSamples(
+        tiny(tmp_path, f"data.source={folder}", "data.cache=true", "data.num_workers=0").data
+    )
+    again = [cached[1], cached[1]]  # decoded, then from memory (stored as uint8: exact)
+    assert list(cached.cache) == [1] and cached.cache[1]["frames"].dtype == torch.uint8
+    for item in again:
+        assert torch.equal(item["frames"], every[1]["frames"])
+        assert torch.equal(item["world_to_cam"], every[1]["world_to_cam"])
+    with pytest.raises(InputError, match="num_workers = 0"):
+        tiny(tmp_path, f"data.source={folder}", "data.cache=true", "data.num_workers=1")
+    with pytest.raises(InputError, match="for a folder only"):
+        tiny(tmp_path, "data.objects=1")  # generated data: data.generate.objects instead
+    config = tiny(
+        tmp_path / "track", f"data.source={folder}", "objective.kind=supervised",
+        "model.inputs=track", "model.track_channels=8", "train.steps=2",
+    )  # fmt: skip
+    train(config, progress=False, log=lambda line: None)
+    assert load_predictor(tmp_path / "track").model.config.inputs == "track"
+
+
 def test_predicted_geometry_trains_on_the_3dgs_predictors_assets(folder, tmp_path):
     """data.geometry = predicted: each video's asset is what `predict` builds from its frame 0
     with the frozen 3DGS predictor (built once per video), and a mixed step runs through it."""

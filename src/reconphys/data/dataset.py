@@ -132,6 +132,8 @@ class DropDataset(Dataset, _Selection):
         allow_incomplete: accept the manifest of an unfinished run (its listed samples are
             complete; the run just has not made the others yet).
         verify: check every listed sample's files (sizes, settings tag) when opening.
+        objects: keep only the samples of the split's first ``objects`` objects, in the
+            manifest's order (0: all) — a smaller training set held out the same way.
     """
 
     def __init__(
@@ -143,6 +145,7 @@ class DropDataset(Dataset, _Selection):
         resolution: int | None = None,
         allow_incomplete: bool = False,
         verify: bool = True,
+        objects: int = 0,
     ):
         self.root = Path(root)
         self.manifest = read_manifest(self.root)
@@ -155,6 +158,9 @@ class DropDataset(Dataset, _Selection):
             )
         self._select(self.settings, views, frames, resolution, split)
         self.samples = [s for s in self.manifest["samples"] if split in (None, s["split"])]
+        if objects:
+            kept = list(dict.fromkeys(s["object_dir"] for s in self.samples))[:objects]
+            self.samples = [s for s in self.samples if s["object_dir"] in set(kept)]
         if verify:
             for sample in self.samples:
                 if not sample_is_complete(self.root, sample["id"], self.settings):

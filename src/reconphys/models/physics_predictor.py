@@ -1,7 +1,10 @@
 """Physics predictor (docs/design.md#models, paper §3.3): video frames of one view → (m, k, d, f).
 
-Per-frame encoder → spatio-temporal trunk (3D residual blocks over [time, height, width], then
-self-attention over time) → MLP → four bounded attributes, one value each per object.
+Two inputs (``PredictorConfig.inputs``): ``"video"``, a per-frame encoder → spatio-temporal trunk
+(3D residual blocks over [time, height, width], then self-attention over time) → MLP; or
+``"track"``, the object's silhouette track alone (:class:`TrackNetwork`: sub-pixel moments per
+frame → temporal convolutions) → MLP. Either gives four bounded attributes, one value each per
+object.
 
 Bounded outputs: mass, stiffness and damping span one to two orders of magnitude, so they are
 mapped log-uniformly into the docs/design.md#attribute-ranges ranges,
@@ -43,6 +46,8 @@ class PredictorConfig:
     extra: dict = field(default_factory=dict)  # encoder-specific options
     silhouette: bool = False  # add the silhouette-statistics branch (SilhouetteBranch)
     motion: bool = False  # feed the encoder each frame's change too (motion_channels; small_cnn)
+    inputs: str = "video"  # "video": the CNN trunk (+ branches above); "track": TrackNetwork alone
+    track_channels: int = 64  # inputs = "track": width of the track's temporal convolutions
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -204,6 +209,55 @@ class SilhouetteBranch(nn.Module):
         return self.out(torch.cat([features.mean(-1), features.amax(-1)], -1))
 
 
+# --- the track network ---------------------------------------------------------------------
+
+INPUTS = ("video", "track")
+TRACK_FEATURES = 2 * SILHOUETTE_STATS + SILHOUETTE_STATS  # silhouette_motion + the statistics
+
+
+def track_features(
+    frames: Tensor,  # [B, T, H, W, 3] in [0, 1], the object on a black backdrop
+) -> Tensor:  # [B, T, 18]
+    """Per frame, the silhouette's motion (:func:`silhouette_motion`: changes since frame 0 in
+    units of the object's own size, and their speed) beside its statistics
+    (:func:`silhouette_statistics`: area, centroid and second moments in the frame)."""
+    stats = silhouette_statistics(frames)
+    return torch.cat([silhouette_motion(stats), stats], -1)
+
+
+class TrackNetwork(nn.Module):
+    """The object's silhouette track over the clip → a feature vector (``inputs = "track"``).
+
+    The physical observables are in how the silhouette moves: how far it falls per frame²
+    (the scale, since gravity is known), how much and how long it squashes at contact (k/m),
+    how fast the squash and the bounce decay (d/m), how far it slides (friction). At 32 px these
+    are fractions of a pixel, which :func:`silhouette_statistics` keeps (coverage-weighted
+    moments) and a strided CNN averages away. Per-channel normalisation of the features
+    (BatchNorm, its running statistics saved with the weights), three temporal convolutions
+    pooled by mean and max over time (where contact happens varies), and a linear map of the
+    whole normalised track (when it happens matters too). Clips shorter than ``num_frames`` are
+    padded with the mean (zeros after normalisation).
+    """
+
+    def __init__(self, num_frames: int, channels: int = 64, hidden: int = 128):
+        super().__init__()
+        self.num_frames = num_frames
+        self.norm = nn.BatchNorm1d(TRACK_FEATURES)
+        layers, previous = [], TRACK_FEATURES
+        for _ in range(3):
+            layers += [nn.Conv1d(previous, channels, 3, padding=1), nn.GELU()]
+            previous = channels
+        self.conv = nn.Sequential(*layers)
+        self.whole = nn.Sequential(nn.Linear(TRACK_FEATURES * num_frames, hidden), nn.GELU())
+        self.out_channels = 2 * channels + hidden
+
+    def forward(self, frames: Tensor) -> Tensor:  # [B, T, H, W, 3] → [B, out_channels]
+        track = self.norm(track_features(frames).transpose(1, 2))  # [B, 18, T]
+        track = F.pad(track, (0, self.num_frames - track.shape[-1]))
+        features = self.conv(track)
+        return torch.cat([features.mean(-1), features.amax(-1), self.whole(track.flatten(1))], -1)
+
+
 # --- attribute bounds -----------------------------------------------------------------------
 
 
@@ -256,10 +310,27 @@ def resize_frames(frames: Tensor, resolution: int) -> Tensor:
 # --- the predictor --------------------------------------------------------------------------
 
 
+def _mlp_head(channels: int, hidden: tuple[int, ...]) -> nn.Sequential:
+    """Features [B, channels] → four logits [B, 4] (GELU MLP)."""
+    layers, previous = [], channels
+    for width in hidden:
+        layers += [nn.Linear(previous, width), nn.GELU()]
+        previous = width
+    layers.append(nn.Linear(previous, len(ATTRIBUTES)))
+    return nn.Sequential(*layers)
+
+
 class PhysicsPredictor(nn.Module):
     def __init__(self, config: PredictorConfig | None = None):
         super().__init__()
         self.config = config = config or PredictorConfig()
+        if config.inputs not in INPUTS:
+            raise ValueError(f"inputs: expected one of {INPUTS}, got {config.inputs!r}")
+        if config.inputs == "track":
+            self.track = TrackNetwork(config.num_frames, config.track_channels)
+            self.head = _mlp_head(self.track.out_channels, config.mlp_hidden)
+            return
+        self.track = None
         if config.encoder not in encoder_names():
             raise ValueError(f"encoder: unknown {config.encoder!r}; known: {encoder_names()}")
         if config.motion and config.encoder != "small_cnn":
@@ -272,12 +343,7 @@ class PhysicsPredictor(nn.Module):
         self.trunk = nn.Sequential(*[Residual3d(c) for _ in range(config.trunk_blocks)])
         self.temporal = TemporalAttention(c, config.attention_heads, config.num_frames)
         self.silhouette = SilhouetteBranch(c) if config.silhouette else None
-        layers, previous = [], c
-        for width in config.mlp_hidden:
-            layers += [nn.Linear(previous, width), nn.GELU()]
-            previous = width
-        layers.append(nn.Linear(previous, len(ATTRIBUTES)))
-        self.head = nn.Sequential(*layers)
+        self.head = _mlp_head(c, config.mlp_hidden)
 
     def forward(self, frames: Tensor) -> dict[str, Tensor]:
         """frames [B, T, H, W, 3] in [0, 1] (one view; T ≤ num_frames, H = W = resolution) →
@@ -287,6 +353,9 @@ class PhysicsPredictor(nn.Module):
         b, t, h, w, _ = frames.shape
         if t > self.config.num_frames:
             raise ValueError(f"frames: at most {self.config.num_frames} frames, got {t}")
+        if self.track is not None:
+            unit = torch.sigmoid(self.head(self.track(frames)))
+            return {"unit": unit, **attributes_from_unit(unit)}
         pixels = motion_channels(frames) if self.config.motion else frames
         images = pixels.reshape(b * t, h, w, pixels.shape[-1]).permute(0, 3, 1, 2)
         features = self.encoder(images)  # [B·T, C, h', w']

@@ -36,7 +36,7 @@ from ..config_loader import (
 from ..data.settings import PRESETS, DataSettings
 from ..errors import InputError
 from ..models.encoders import encoder_names
-from ..models.physics_predictor import PredictorConfig
+from ..models.physics_predictor import INPUTS, PredictorConfig
 
 GENERATE = "generate"  # data.source value: generate the samples on the fly (no folder)
 OBJECTIVES = ("self_supervised", "supervised", "mixed")
@@ -56,6 +56,8 @@ class DataConfig:
     split: str = "train"  # train, test or all
     view: int = 0  # the input view, 0–3 (docs/design.md#conventions)
     all_views: bool = False  # train on every view, each its own video (4× the videos; not eval)
+    objects: int = 0  # a folder only: the split's first N objects' samples (0: all; data curves)
+    cache: bool = False  # keep each decoded video in memory (uint8): later epochs read no files
     frames: int = 20  # the predictor reads frames 0..frames−1; the loss compares 1..frames−1
     resolution: int = 64  # predictor input, pixels (square; frames are resized to it)
     render_resolution: int = 0  # size of the photometric loss' renders, pixels (0: resolution)
@@ -261,6 +263,19 @@ def _validate(config: TrainConfig) -> None:
         "data.gs_model",
         "a 3DGS predictor is only used with data.geometry = predicted",
     )
+    _require(d.objects >= 0, "data.objects", f"must be ≥ 0 (0: all), got {d.objects}")
+    _require(
+        d.objects == 0 or d.source != GENERATE,
+        "data.objects",
+        "for a folder only; generated data takes data.generate.objects",
+    )
+    _require(
+        not (d.cache and d.num_workers),
+        "data.cache",
+        "the cache lives in the training process: set data.num_workers = 0",
+    )
+    _choice(m.inputs, INPUTS, "model.inputs")
+    _require(m.track_channels >= 1, "model.track_channels", "must be ≥ 1")
     _choice(m.encoder, tuple(encoder_names()), "model.encoder")
     _require(
         all(c >= 1 for c in m.encoder_channels) and len(m.encoder_channels) >= 1,

@@ -91,9 +91,10 @@ class TrainingSamples(Dataset):
     id, asset}`` of one view, frames 0..T−1, at the loss' render resolution.
 
     With ``config.all_views`` every view of a sample is its own item (item ``i`` = sample
-    ``i // 4``, view ``i % 4``): four videos of the same drop from four azimuths."""
+    ``i // 4``, view ``i % 4``): four videos of the same drop from four azimuths. With
+    ``assets=False`` the asset is None (the supervised objective simulates nothing)."""
 
-    def __init__(self, config: DataConfig):
+    def __init__(self, config: DataConfig, assets: bool = True):
         split = None if config.split == "all" else config.split
         frames = range(config.frames)
         resolution = config.loss_resolution
@@ -120,13 +121,22 @@ class TrainingSamples(Dataset):
             self.settings = read_manifest(root)["parsed_settings"]
             self._check_frames(config)
             self.per_view = [
-                DropDataset(root, split, views=[v], frames=frames, resolution=resolution)
+                DropDataset(
+                    root,
+                    split,
+                    views=[v],
+                    frames=frames,
+                    resolution=resolution,
+                    objects=config.objects,
+                )
                 for v in self.views
             ]
             self.source = str(root.resolve())
         self.dataset = self.per_view[0]  # samples, assets and attributes (the same in every view)
         if len(self.dataset) == 0:
             raise InputError(f"no samples in split {config.split!r}", field="data.split")
+        self.assets = assets
+        self.cache: dict[int, dict] | None = {} if config.cache else None
         self.gs_predictor = None
         self.geometry = GEOMETRY
         if config.geometry == "predicted":
@@ -188,9 +198,28 @@ class TrainingSamples(Dataset):
             )
         return self._predicted_assets[index]
 
-    def __getitem__(self, index: int) -> dict:
+    def _video(self, index: int) -> dict:
+        """Frames, cameras and attributes of item ``index`` (from the cache when it has them;
+        frames are cached as uint8 when that is exact, i.e. stored at the loss' resolution)."""
+        if self.cache is not None and index in self.cache:
+            item = dict(self.cache[index])
+            if item["frames"].dtype == torch.uint8:
+                item["frames"] = item["frames"].float() / 255
+            return item
         item = self.per_view[index % len(self.views)][index // len(self.views)]
-        if self.gs_predictor is None:
+        if self.cache is not None:
+            kept = {k: item[k] for k in ("frames", "K", "world_to_cam", "attributes")}
+            quantised = (item["frames"] * 255).round().to(torch.uint8)
+            if torch.equal(quantised.float() / 255, item["frames"]):
+                kept["frames"] = quantised
+            self.cache[index] = kept
+        return item
+
+    def __getitem__(self, index: int) -> dict:
+        item = self._video(index)
+        if not self.assets:
+            asset = None
+        elif self.gs_predictor is None:
             asset = self.asset(index)
         else:
             asset = self.predicted_asset(index, item)

@@ -183,7 +183,8 @@ class Trainer:
         if self.config.train.threads:
             set_cpu_threads(self.config.train.threads)
         torch.set_flush_denormal(True)  # settling objects make float32 denormals (slow on CPU)
-        self.data = TrainingSamples(self.config.data)
+        supervised = self.config.objective.kind == "supervised"  # no rollout: no assets to build
+        self.data = TrainingSamples(self.config.data, assets=not supervised)
         self.init = self._load_init(self.config.train.init) if self.config.train.init else None
 
     def _build(self) -> None:
