@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DEMO_OUT ?= demo_out
 
-.PHONY: install demo test lint bench model gs-model clean
+.PHONY: install demo test lint bench model model-cnn gs-model clean
 
 install: $(VENV)/.installed
 
@@ -34,22 +34,32 @@ bench: install
 	$(BIN)/python benchmarks/bench_simulator.py
 	$(BIN)/python benchmarks/bench_renderer.py
 
-# The shipped physics predictor's recipe (docs/training.md "Results"; ~75 min on 2 CPU cores):
-# the cpu_small data (configs/data_small.toml), supervised pre-training on the observables, a
-# mixed photometric fine-tune, then the model is copied to the package's weights.
-CPU_SMALL := configs/cpu_small.toml objective.supervised_target=observables --no-progress
+# The shipped physics predictor's recipe (docs/training.md "Track network"; ~1 h on 2 CPU cores):
+# pybullet's meshes (the meshes extra), the held-out test set data/pyb, training videos of every
+# other mesh, the silhouette-track network trained supervised on the observables, copied into the
+# package's weights. The previous CNN recipe (cpu_small) is `make model-cnn`.
 model: install
+	$(BIN)/python -m pip install -q -e '.[meshes]'
+	$(BIN)/reconphys make-data --config configs/data_pyb.toml --workers 2 --out data/pyb
+	$(BIN)/python benchmarks/held_out_meshes.py data/pyb data/pybullet_meshes
+	$(BIN)/reconphys make-data --config configs/data_pybullet.toml --workers 2 --out data/pybullet
+	$(BIN)/reconphys train configs/track_pybullet.toml --no-progress
+	cp runs/track_pybullet/model.safetensors src/reconphys/weights/physics_predictor.safetensors
+	cp runs/track_pybullet/model.json src/reconphys/weights/physics_predictor.json
+
+# The CNN predictor shipped until 2026-11-25 (docs/training.md "Results"; ~75 min): the cpu_small
+# data, supervised pre-training on the observables, a mixed photometric fine-tune (runs/cpu_small_mixed).
+CPU_SMALL := configs/cpu_small.toml objective.supervised_target=observables --no-progress
+model-cnn: install
 	$(BIN)/reconphys make-data --config configs/data_small.toml --out data/cpu_small
 	$(BIN)/reconphys train $(CPU_SMALL) objective.kind=supervised train.steps=2000 \
 	    train.batch_size=8 train.checkpoint_every=250 train.out=runs/cpu_small_sup_obs
 	$(BIN)/reconphys train $(CPU_SMALL) objective.kind=mixed train.init=runs/cpu_small_sup_obs \
 	    optim.lr=3e-4 optim.warmup_steps=0 train.steps=150 train.checkpoint_every=25 \
 	    train.log_every=5 train.out=runs/cpu_small_mixed
-	cp runs/cpu_small_mixed/model.safetensors src/reconphys/weights/physics_predictor.safetensors
-	cp runs/cpu_small_mixed/model.json src/reconphys/weights/physics_predictor.json
 
 # The shipped 3DGS predictor's recipe (docs/usage.md "The 3DGS predictor"): frame 0 of the
-# cpu_small data (made by `make model` above), 1500 steps × 4 samples (configs/gs_cpu_small.toml).
+# cpu_small data (made by `make model-cnn` above), 1500 steps × 4 samples (configs/gs_cpu_small.toml).
 gs-model: install
 	$(BIN)/reconphys train-gs --config configs/gs_cpu_small.toml --threads 1 --no-progress
 	cp runs/gs_cpu_small/model.safetensors src/reconphys/weights/gaussian_predictor.safetensors

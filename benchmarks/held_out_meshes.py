@@ -1,13 +1,19 @@
-"""A mesh folder for training that holds out a dataset's test objects.
+"""Mesh folders for held-out evaluation and training, from the pybullet wheel.
 
-Copies the folder of every usable pybullet mesh (``reconphys.data.sources.PybulletSource``: the
-wheel's ``random_urdfs`` and a few named meshes, broken files left out) into OUT, except the
-objects of DATASET's test split, so that ``make-data --source OUT`` makes training videos of
-objects DATASET never tests on. Meshes at the top of pybullet_data (bunny, duck, …) are skipped:
-their folder is the whole package. `make model` runs it (Makefile; docs/training.md "Track
-network").
+``DATASET OUT``: copies the folder of every usable pybullet mesh (``PybulletSource``: the wheel's
+``random_urdfs`` and a few named meshes, broken files left out) into OUT, except the objects of
+DATASET's test split, so that ``make-data --source OUT`` makes training videos of objects
+DATASET never tests on. Meshes at the top of pybullet_data (bunny, duck, …) are skipped: their
+folder is the whole package. `make model` runs it (docs/training.md "Track network and a data
+curve").
+
+``--others OUT``: the wheel's other meshes — robot links, toys, props (laikago, kuka, xarm,
+racecar, …; ``.obj``/``.stl`` outside ``random_urdfs``, collision hulls and the named meshes of
+the pybullet source left out) — flattened into OUT: a mesh folder none of the pybullet source's
+objects is in (docs/evaluation.md "another mesh folder").
 
     python benchmarks/held_out_meshes.py data/pyb data/pybullet_meshes
+    python benchmarks/held_out_meshes.py --others data/other_meshes
 """
 
 from __future__ import annotations
@@ -16,18 +22,13 @@ import argparse
 import shutil
 from pathlib import Path
 
+from reconphys.assets.mesh import PYBULLET_NAMED_MESHES
 from reconphys.data.sources import PybulletSource
 from reconphys.data.storage import read_manifest
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "dataset", type=Path, help="a make-data folder: its test objects are left out"
-    )
-    parser.add_argument("out", type=Path, help="the mesh folder to write")
-    args = parser.parse_args()
-    manifest = read_manifest(args.dataset)
+def training_meshes(dataset: Path, out: Path) -> None:
+    manifest = read_manifest(dataset)
     held_out = {o["id"] for o in manifest["objects"] if o["split"] == "test"}
     source = PybulletSource()
     copied = skipped = 0
@@ -36,12 +37,46 @@ def main() -> None:
         if relative.as_posix() in held_out or relative.parent == Path("."):
             skipped += 1
             continue
-        target = args.out / relative.parent
+        target = out / relative.parent
         if not target.exists():
             shutil.copytree(path.parent, target)
         copied += 1
-    held = f"{len(held_out)} test objects of {args.dataset}"
-    print(f"{copied} meshes in {args.out}; left out {skipped} ({held} and top-level meshes)")
+    held = f"{len(held_out)} test objects of {dataset}"
+    print(f"{copied} meshes in {out}; left out {skipped} ({held} and top-level meshes)")
+
+
+def other_meshes(out: Path) -> None:
+    root = PybulletSource().root
+    out.mkdir(parents=True, exist_ok=True)
+    copied = 0
+    for path in sorted(root.rglob("*")):
+        relative = path.relative_to(root).as_posix()
+        if (
+            path.suffix.lower() not in (".obj", ".stl")
+            or relative.startswith("random_urdfs/")
+            or relative in PYBULLET_NAMED_MESHES
+            or "_coll" in path.stem
+            or "vhacd" in path.stem.lower()
+        ):
+            continue
+        shutil.copyfile(path, out / relative.replace("/", "__"))
+        copied += 1
+    print(f"{copied} meshes in {out} (pybullet_data outside random_urdfs)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--others", action="store_true", help="the wheel's other meshes → OUT")
+    parser.add_argument("paths", type=Path, nargs="+", help="DATASET OUT, or OUT with --others")
+    args = parser.parse_args()
+    if args.others:
+        if len(args.paths) != 1:
+            parser.error("--others takes one folder: OUT")
+        other_meshes(args.paths[0])
+    else:
+        if len(args.paths) != 2:
+            parser.error("expected DATASET OUT")
+        training_meshes(*args.paths)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,6 @@ from reconphys.pipeline.predict import predict_observation
 from reconphys.pipeline.samples import load_sample
 from reconphys.pipeline.search import (
     OBSERVABLES,
-    TEMPERATURE,
     observable_bounds,
     observables,
     profile_interval,
@@ -53,12 +52,18 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="per-sample results (JSON)")
     parser.add_argument("--split", default="test", help="split to run on (train: calibration)")
     parser.add_argument(
+        "--rows", default=None, help="calibrate from the per-sample results of an earlier --out"
+    )
+    parser.add_argument(
         "--calibrate",
         action="store_true",
         help="print the 10–90 %% coverage for a range of profile temperatures and the one that "
         "covers 80 %% (run it on training objects, not the test split)",
     )
     args = parser.parse_args()
+    if args.rows:  # no search: recalibrate the intervals from stored profiles
+        calibrate(json.loads(Path(args.rows).read_text()))
+        return
     set_cpu_threads(args.threads)
     root = Path(args.data)
     manifest = read_manifest(root)
@@ -96,6 +101,7 @@ def main() -> None:
             "search": observables(found.physics).tolist(),
             "intervals": [history["intervals"][n] for n in OBSERVABLES],
             "profiles": [history["profiles"][n] for n in OBSERVABLES],
+            "render_size": history["render_size"],
         }
         rows.append(row)
         cells = " ".join(
@@ -119,7 +125,7 @@ def main() -> None:
             cells.append(f"{name} net {ratio['network']:.2f}× search {ratio['search']:.2f}×")
         seconds = sum(r["seconds"] for r in chosen) / len(chosen)
         print(f"{kind:5} n={len(chosen):3}: " + "; ".join(cells) + f"; {seconds:.1f} s/scene")
-        print(f"      10–90 % intervals (τ = {TEMPERATURE}): {coverage_line(chosen)}")
+        print(f"      10–90 % intervals (τ by size): {coverage_line(chosen)}")
     if args.calibrate:
         calibrate(rows)
     if args.out:
@@ -137,12 +143,15 @@ def coverage_line(rows: list[dict], intervals: str = "intervals") -> str:
 
 
 def calibrate(rows: list[dict]) -> None:
-    """Intervals for a range of temperatures from the stored profiles; the one whose mean coverage
-    over the three observables is nearest 80 %."""
+    """Intervals for a range of τ·pixels (each sample's τ = that / its compared pixels) from the
+    stored profiles; the one whose mean coverage over the three observables is nearest 80 %."""
     bounds = observable_bounds()
+    pixels = sorted(r["render_size"][0] * r["render_size"][1] for r in rows)
+    print(f"compared pixels: median {pixels[len(pixels) // 2]} ({pixels[0]}–{pixels[-1]})")
     best = None
-    for temperature in (0.01, 0.03, 0.1, 0.3, 0.5, 0.7, 1.0, 1.2, 1.5, 2.0, 3.0):
+    for product in (30, 100, 200, 300, 500, 700, 1000, 1500, 2000, 3000, 5000):
         for r in rows:
+            temperature = product / (r["render_size"][0] * r["render_size"][1])
             r["trial"] = [
                 profile_interval(
                     torch.tensor(p["values"]),
@@ -156,10 +165,12 @@ def calibrate(rows: list[dict]) -> None:
             r["trial"][i][0] <= r["true"][i] <= r["trial"][i][1] for r in rows for i in range(3)
         ]
         coverage = sum(inside) / len(inside)
-        print(f"τ = {temperature:<6} mean coverage {coverage:.0%}: {coverage_line(rows, 'trial')}")
+        print(
+            f"τ·pixels = {product:<5} mean coverage {coverage:.0%}: {coverage_line(rows, 'trial')}"
+        )
         if best is None or abs(coverage - 0.8) < best[0]:
-            best = (abs(coverage - 0.8), temperature)
-    print(f"calibrated τ = {best[1]} (set TEMPERATURE in pipeline/search.py)")
+            best = (abs(coverage - 0.8), product)
+    print(f"calibrated τ·pixels = {best[1]} (TEMPERATURE_PIXELS in pipeline/search.py)")
 
 
 if __name__ == "__main__":

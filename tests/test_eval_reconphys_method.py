@@ -8,6 +8,7 @@ cores slow the simulation many times over.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 import torch
@@ -17,6 +18,7 @@ from typer.testing import CliRunner
 from reconphys.cli import app
 from reconphys.data import make_dataset, make_settings
 from reconphys.eval.methods import METHODS, MethodOptions
+from reconphys.eval.methods.base import INPUT_FRAMES
 from reconphys.eval.samples import EvalSet
 from reconphys.models import shipped
 from reconphys.models.physics_predictor import PhysicsPredictor, PredictorConfig
@@ -156,6 +158,11 @@ def test_evaluate_model_errors_are_one_line(dataset, tmp_path, monkeypatch):
     assert "model file not found" in line
     line = run("--methods", "trivial", "--model", str(tmp_path / "none.safetensors"))
     assert "--model: only the reconphys methods use a model" in line
+    long = replace(TINY, num_frames=INPUT_FRAMES + 1)  # it would read the future window
+    path = save_predictor(PhysicsPredictor(long), tmp_path / "long.safetensors",
+                          model_metadata(long, 1, 0.03))  # fmt: skip
+    line = run("--methods", "reconphys_search", "--model", str(path))
+    assert f"the model reads {INPUT_FRAMES + 1} frames" in line and "future" in line
 
 
 def test_search_method_starts_from_the_network_on_the_true_geometry(dataset, model_path):

@@ -26,6 +26,7 @@ from reconphys.pipeline.search import (
     profile_interval,
     search,
     substep_groups,
+    temperature_for,
 )
 from reconphys.threads import set_cpu_threads
 
@@ -119,6 +120,21 @@ def test_profile_interval_of_a_sharp_minimum_is_narrow_and_holds_it():
     assert sigma > 0.1  # well resolved by the grid (0.025) and the quantile line (0.0025)
     assert low == pytest.approx(best - 1.2816 * sigma, abs=0.01)
     assert high == pytest.approx(best + 1.2816 * sigma, abs=0.01)
+
+
+def test_the_temperature_falls_as_the_compared_pixels_grow():
+    """τ = 2 / N_eff with N_eff ∝ pixels: four times the pixels, a quarter of τ; and on the
+    quadratic profile above, half the interval's width."""
+    assert temperature_for(4000) == pytest.approx(temperature_for(1000) / 4)
+    values = torch.linspace(0.0, 10.0, 401, dtype=torch.float64)
+    errors = 1e-2 + 0.01 * (values - 5.0) ** 2
+    widths = [
+        (lambda lo_hi: lo_hi[1] - lo_hi[0])(
+            profile_interval(values, errors, (0.0, 10.0), temperature_for(p), points=4001)
+        )
+        for p in (1000, 4000)
+    ]
+    assert widths[1] == pytest.approx(widths[0] / 2, rel=0.02)
 
 
 def test_attributes_of_keeps_the_mass_unless_a_ratio_needs_another():

@@ -30,6 +30,7 @@ from ..render import Cameras, render
 from ..render.video import to_uint8
 from .lpips import load_lpips
 from .methods import METHODS, Method, MethodOptions, Prediction
+from .methods.base import INPUT_FRAMES
 from .metrics import (
     CHAMFER_POINTS,
     EMD_POINTS,
@@ -41,8 +42,6 @@ from .metrics import (
 )
 from .samples import EvalSample, EvalSet, TrivialAttributes
 
-INPUT_FRAMES = 20  # frames 0–19: input and reconstruction window; 20–29: future
-# (docs/design.md#conventions)
 FRAMES_PER_RENDER_CALL = 8  # bounds renderer memory at large resolutions
 INITIAL_SUFFIX = "_initial"  # row of a method's initial guess (springgaus_initial)
 

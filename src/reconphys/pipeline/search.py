@@ -13,7 +13,8 @@ inside the attribute ranges (:func:`attributes_of`). Two stages, each a few batc
    (the other two at their best) — a wrong network start far from the truth is caught here, and
    the profile gives the interval: a posterior ∝ exp(−(E − E_min) / (τ·E_min)) over the profile,
    i.e. Gaussian pixel noise whose variance is the best fit's residual, with τ = 2 / (effective
-   number of independent pixels) calibrated once on training objects (:data:`TEMPERATURE`). An
+   number of independent pixels), proportional to the pixels compared and calibrated on training
+   objects at two sizes (:func:`temperature_for`). An
    observable the video does not show (the friction of an object that never slides) has a flat
    profile and comes out as a wide interval; when it is nearly the prior's (:data:`UNDETERMINED`),
    the start value is kept for it instead of a best fit that is noise.
@@ -49,11 +50,14 @@ TIE = 1e-6
 OBSERVABLES = ("log_k_over_m", "log_d_over_m", "friction")
 PROFILE_POINTS = 9  # evenly over each observable's range
 PROFILE_LOCAL = (-1.0, -0.5, -0.2, 0.2, 0.5, 1.0)  # × the last span, around the best
-# Temperature of the profile posterior, relative to the best error (τ = 2 / effective independent
-# pixels). Calibrated by ``benchmarks/search_refinement.py --calibrate`` on the training objects
-# of a pybullet-mesh dataset (not its test objects): the τ whose 10–90 % intervals cover the truth
-# on 80 % of (sample, observable) pairs; docs/training.md "Intervals".
-TEMPERATURE = 1.2
+# Temperature of the profile posterior, relative to the best error: τ = 2 / (effective number of
+# independent pixels), and that number grows with the pixels compared (the window after
+# :func:`comparison_view`), so τ = TEMPERATURE_PIXELS / pixels. Calibrated by
+# ``benchmarks/search_refinement.py --calibrate`` on training meshes of the pybullet source (never
+# a test split): the same 10 meshes × 2 videos at 32 px (~870 pixels compared) and at 128 px
+# (~3650) both put 80 % coverage of the 10–90 % intervals at τ·pixels = 1000 (80 % and 78 %);
+# docs/training.md "Intervals".
+TEMPERATURE_PIXELS = 1000.0
 QUANTILES = (0.1, 0.9)
 # An observable whose interval is at least this share of the prior's own 10–90 % width is not
 # shown by the recording: its best fit is noise (or a wrong geometry compensating), so the start
@@ -176,11 +180,16 @@ def photometric_errors(
     return ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
 
 
+def temperature_for(pixels: int) -> float:
+    """τ of the profile posterior for a compared view of ``pixels`` pixels (≥ 1)."""
+    return TEMPERATURE_PIXELS / max(pixels, 1)
+
+
 def profile_interval(
     values: Tensor,  # [P] grid along one observable (any order)
     errors: Tensor,  # [P] the photometric error at each
     bounds: tuple[float, float],  # the observable's reachable range
-    temperature: float = TEMPERATURE,
+    temperature: float,
     quantiles: tuple[float, float] = QUANTILES,
     points: int = 512,
 ) -> tuple[float, float]:
@@ -255,7 +264,7 @@ def search(
     spans: tuple[float, ...] = SPANS,
     candidates: int = CANDIDATES,
     profiles: bool = True,  # stage 2: global check and intervals
-    temperature: float = TEMPERATURE,
+    temperature: float | None = None,  # of the intervals; None: temperature_for(compared pixels)
     masks: Tensor | None = None,  # [T, H, W] the object's masks: compare only around them
 ) -> tuple[Asset, dict]:
     """Coordinate search from the asset's attributes, then profiles → (asset with the best, history
@@ -268,6 +277,8 @@ def search(
     window = None if masks is None else object_window(masks)
     frames, camera = comparison_view(frames, camera, resolution, window)
     size = list(frames.shape[1:3])
+    if temperature is None:
+        temperature = temperature_for(size[0] * size[1])
     bounds = observable_bounds()
     start = observables(asset.physics)
     current = torch.maximum(torch.minimum(start, bounds[:, 1]), bounds[:, 0])

@@ -16,7 +16,12 @@ from torch import Tensor
 
 from ...assets.asset import Asset
 from ...assets.gaussians import Gaussians
+from ...errors import InputError
+from ...models.shipped import LoadedPredictor, load_predictor
 from ..samples import EvalSample, TrivialAttributes
+
+INPUT_FRAMES = 20  # frames 0–19: what a method may see; 20–29 are the future window
+# (docs/design.md#conventions)
 
 GROUND_TRUTH_GEOMETRY = "ground truth"  # the true Gaussians, anchors and initial state
 FITTED_GEOMETRY = "fitted to the 4 views"
@@ -79,3 +84,16 @@ class Method:
 
     def predict(self, sample: EvalSample) -> Prediction:
         raise NotImplementedError
+
+
+def input_predictor(options: MethodOptions) -> LoadedPredictor:
+    """The physics predictor of ``options`` (see :func:`load_predictor`), refused when it reads
+    more than the :data:`INPUT_FRAMES` a method may see (it would see the future window)."""
+    predictor = load_predictor(options.model, device=options.device)
+    if predictor.num_frames > INPUT_FRAMES:
+        raise InputError(
+            f"the model reads {predictor.num_frames} frames; evaluate lets a method see frames "
+            f"0–{INPUT_FRAMES - 1} (from {INPUT_FRAMES} on is the future it is scored on)",
+            source=str(predictor.path),
+        )
+    return predictor

@@ -17,10 +17,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from ...models.shipped import load_predictor
 from ...physics import ATTRIBUTES
 from ..samples import EvalSample
-from .base import GROUND_TRUTH_GEOMETRY, Method, MethodOptions, Prediction
+from .base import GROUND_TRUTH_GEOMETRY, Method, MethodOptions, Prediction, input_predictor
 
 
 class ReconPhysMethod(Method):
@@ -30,7 +29,7 @@ class ReconPhysMethod(Method):
 
     def __init__(self, options: MethodOptions):
         super().__init__(options)
-        self.predictor = load_predictor(options.model, device=options.device)
+        self.predictor = input_predictor(options)
         self.description = f"{self.description} [model: {self.predictor.path}]"
 
     def predict(self, sample: EvalSample) -> Prediction:

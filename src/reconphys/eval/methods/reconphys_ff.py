@@ -16,10 +16,9 @@ from __future__ import annotations
 
 from ...capture.observation import stored_observation
 from ...models.gaussian_shipped import load_gaussian_predictor
-from ...models.shipped import load_predictor
 from ...pipeline.predict import predict_observation
 from ..samples import EvalSample
-from .base import PREDICTED_GEOMETRY, Method, MethodOptions, Prediction
+from .base import PREDICTED_GEOMETRY, Method, MethodOptions, Prediction, input_predictor
 
 
 class ReconPhysFeedForwardMethod(Method):
@@ -30,7 +29,7 @@ class ReconPhysFeedForwardMethod(Method):
 
     def __init__(self, options: MethodOptions):
         super().__init__(options)
-        self.predictor = load_predictor(options.model, device=options.device)
+        self.predictor = input_predictor(options)
         self.gs_predictor = load_gaussian_predictor()  # once, not per sample
 
     def predict(self, sample: EvalSample) -> Prediction:

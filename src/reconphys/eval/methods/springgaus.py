@@ -38,10 +38,9 @@ from ...geometry import axis_angle_to_matrix, rigid_velocity
 from ...physics import ATTRIBUTE_RANGES, State, deform_means, rollout
 from ...render import Cameras, render
 from ..samples import EvalSample
-from .base import FITTED_GEOMETRY, GROUND_TRUTH_GEOMETRY, Method, Prediction
+from .base import FITTED_GEOMETRY, GROUND_TRUTH_GEOMETRY, INPUT_FRAMES, Method, Prediction
 from .fitting import StaticFitSettings, cached_static_fit, photometric_loss, silhouette_centre
 
-INPUT_FRAMES = 20  # frames 0–19: what a method may see (docs/design.md#conventions)
 VELOCITY_FRAMES = 4  # frames 1–4 fit the initial velocity (contact happens from frame ~5 on)
 STATIC_SHARE, VELOCITY_SHARE = 0.30, 0.15  # of the budget; the dynamic stage gets the rest
 ADAM_EPS = 1e-5  # of the attribute optimiser (see _fit_attributes)

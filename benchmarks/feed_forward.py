@@ -1,0 +1,117 @@
+"""The feed-forward physics predictor on a dataset's test split: MAE ratios to trivial, fast.
+
+For each model given, the observables (log k/m, log d/m, friction) predicted from view 0 of every
+test video (the model's own frames and size), against the truth; trivial is the median of the
+training split. Ratios are trivial's MAE / the model's (> 1: better than the median guess), per
+launch (drop / toss) and over all. No rendering or simulation: seconds for a data curve where
+``evaluate`` (future PSNR, Chamfer, EMD) takes minutes.
+
+    python benchmarks/feed_forward.py data/pyb --model runs/trk_pyb runs/trk_big
+
+``--curve PNG`` draws the ratios against each model's number of training videos (its model.json):
+a data curve, one panel per observable, drops and all (docs/images/track_data_curve.png).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+import torch
+from PIL import Image, ImageDraw
+
+from reconphys.data.dataset import DropDataset
+from reconphys.data.storage import read_manifest
+from reconphys.eval.plots import COLOURS, Axes
+from reconphys.models.shipped import load_predictor
+from reconphys.threads import set_cpu_threads
+
+NAMES = ("log k/m", "log d/m", "friction")
+ATTRIBUTE_NAMES = ("mass", "stiffness", "damping", "friction")
+
+
+def observables(mass, stiffness, damping, friction) -> torch.Tensor:  # [..., 3]
+    return torch.stack(
+        [torch.log(stiffness / mass), torch.log(damping / mass), friction], -1
+    ).double()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("data", type=Path, help="dataset folder written by make-data")
+    parser.add_argument("--model", nargs="+", default=[None], help="runs or weights (shipped)")
+    parser.add_argument("--split", default="test")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--curve", type=Path, default=None, help="PNG: ratios vs training videos")
+    args = parser.parse_args()
+    set_cpu_threads(args.threads)
+    manifest = read_manifest(args.data)
+    train = [s for s in manifest["samples"] if s["split"] == "train"]
+    truth_of = {}
+    for s in manifest["samples"]:
+        meta = json.loads((args.data / s["dir"] / "sample.json").read_text())
+        a = {k: torch.tensor(float(v)) for k, v in meta["attributes"].items()}
+        launch = meta["initial_state"].get("launch", "drop")
+        truth_of[s["id"]] = (observables(**{k: a[k] for k in ATTRIBUTE_NAMES}), launch)
+    median = torch.stack([truth_of[s["id"]][0] for s in train]).median(0).values
+    print(f"{args.data}: trivial = median of {len(train)} training samples")
+    curve = []  # (training videos, {launch: ratios [3]})
+    for model in args.model:
+        predictor = load_predictor(model)
+        dataset = DropDataset(args.data, args.split, views=[predictor.view])
+        started = time.perf_counter()
+        rows = []
+        for index in range(len(dataset)):
+            item = dataset[index]
+            out = predictor.predict(item["frames"][0][None])
+            predicted = observables(*(out[k] for k in ATTRIBUTE_NAMES))[0]
+            true, launch = truth_of[item["id"]]
+            rows.append((predicted, true, launch))
+        seconds = (time.perf_counter() - started) / max(len(rows), 1)
+        videos = predictor.metadata.get("training", {}).get("data", {}).get("samples", 0)
+        print(f"{model or 'shipped'} ({videos} training videos; {seconds * 1e3:.0f} ms / video)")
+        curve.append((videos, {}))
+        for kind in ("drop", "toss", "all"):
+            chosen = [r for r in rows if kind == "all" or r[2] == kind]
+            if not chosen:
+                continue
+            predicted = torch.stack([r[0] for r in chosen])
+            true = torch.stack([r[1] for r in chosen])
+            ratio = (median - true).abs().mean(0) / (predicted - true).abs().mean(0)
+            curve[-1][1][kind] = ratio.tolist()
+            cells = " / ".join(f"{v:.2f}×" for v in ratio.tolist())
+            print(f"  {kind:5} n={len(chosen):3}: {cells}  ({' / '.join(NAMES)})")
+    if args.curve:
+        plot_curve(sorted(curve, key=lambda c: c[0]), args.curve, str(args.data))
+
+
+def plot_curve(curve: list[tuple[int, dict]], path: Path, title: str) -> None:
+    """Ratio to trivial vs training videos (log axis), one panel per observable."""
+    image = Image.new("RGB", (60 + 400 * 3, 420), (255, 255, 255))
+    draw = ImageDraw.Draw(image)
+    xs = [math.log10(max(v, 1)) for v, _ in curve]
+    kinds = [k for k in ("drop", "all") if all(k in ratios for _, ratios in curve)]
+    top = max(max(r[k][i] for _, r in curve for k in kinds) for i in range(3))
+    for i, name in enumerate(NAMES):
+        left = 70 + 400 * i
+        axes = Axes(draw, (left, 40, left + 320, 360), (min(xs) - 0.05, max(xs) + 0.05),
+                    (0.0, top * 1.1), f"{name}: trivial MAE / model MAE",
+                    "log10 training videos")  # fmt: skip
+        axes.line([min(xs) - 0.05, max(xs) + 0.05], [1.0, 1.0], (0, 0, 0), width=1, dash=True)
+        for j, kind in enumerate(kinds):
+            ys = [r[kind][i] for _, r in curve]
+            axes.line(xs, ys, COLOURS[j])
+            for x, y in zip(xs, ys, strict=True):
+                axes.marker(x, y, COLOURS[j])
+            draw.text((left + 10, 50 + 16 * j), f"{kind}", fill=COLOURS[j])
+    draw.text((10, 400), f"{title} test split; dashed: the median guess", fill=(0, 0, 0))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    image.save(path)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
