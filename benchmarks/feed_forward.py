@@ -19,6 +19,7 @@ import json
 import math
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import torch
 from PIL import Image, ImageDraw
@@ -27,16 +28,15 @@ from reconphys.data.dataset import DropDataset
 from reconphys.data.storage import read_manifest
 from reconphys.eval.plots import COLOURS, Axes
 from reconphys.models.shipped import load_predictor
+from reconphys.physics import ATTRIBUTES
+from reconphys.pipeline.search import observables
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
-ATTRIBUTE_NAMES = ("mass", "stiffness", "damping", "friction")
 
 
-def observables(mass, stiffness, damping, friction) -> torch.Tensor:  # [..., 3]
-    return torch.stack(
-        [torch.log(stiffness / mass), torch.log(damping / mass), friction], -1
-    ).double()
+def observables_of(attributes: dict) -> torch.Tensor:  # [3] log k/m, log d/m, f (float64)
+    return observables(SimpleNamespace(**{k: float(attributes[k]) for k in ATTRIBUTES})).double()
 
 
 def main() -> None:
@@ -53,9 +53,8 @@ def main() -> None:
     truth_of = {}
     for s in manifest["samples"]:
         meta = json.loads((args.data / s["dir"] / "sample.json").read_text())
-        a = {k: torch.tensor(float(v)) for k, v in meta["attributes"].items()}
         launch = meta["initial_state"].get("launch", "drop")
-        truth_of[s["id"]] = (observables(**{k: a[k] for k in ATTRIBUTE_NAMES}), launch)
+        truth_of[s["id"]] = (observables_of(meta["attributes"]), launch)
     median = torch.stack([truth_of[s["id"]][0] for s in train]).median(0).values
     print(f"{args.data}: trivial = median of {len(train)} training samples")
     curve = []  # (training videos, {launch: ratios [3]})
@@ -67,7 +66,7 @@ def main() -> None:
         for index in range(len(dataset)):
             item = dataset[index]
             out = predictor.predict(item["frames"][0][None])
-            predicted = observables(*(out[k] for k in ATTRIBUTE_NAMES))[0]
+            predicted = observables_of({k: out[k][0] for k in ATTRIBUTES})
             true, launch = truth_of[item["id"]]
             rows.append((predicted, true, launch))
         seconds = (time.perf_counter() - started) / max(len(rows), 1)
