@@ -34,10 +34,11 @@ bench: install
 	$(BIN)/python benchmarks/bench_simulator.py
 	$(BIN)/python benchmarks/bench_renderer.py
 
-# The shipped physics predictor's recipe (docs/training.md "Track network"; ~1 h on 2 CPU cores):
-# pybullet's meshes (the meshes extra), the held-out test set data/pyb, training videos of every
-# other mesh, the silhouette-track network trained supervised on the observables, copied into the
-# package's weights. The previous CNN recipe (cpu_small) is `make model-cnn`.
+# The shipped physics predictor's recipe (docs/training.md "An ensemble of seeds"; ~2 h on 2 CPU
+# cores): pybullet's meshes (the meshes extra), the held-out test set data/pyb, training videos of
+# every other mesh, five silhouette-track networks (seeds 0-4) trained supervised on the
+# observables, their ensemble copied into the package's weights. The previous CNN recipe
+# (cpu_small) is `make model-cnn`.
 model: install
 	$(BIN)/python -m pip install -q -e '.[meshes]'
 	$(BIN)/reconphys make-data --config configs/data_pyb.toml --workers 2 --out data/pyb

@@ -398,6 +398,31 @@ def test_show_writes_a_contact_sheet(reference, tmp_path):
     assert missing.exit_code == 2 and "manifest.json" in missing.output
 
 
+def test_a_manifest_pointing_outside_its_folder_is_refused(reference, tmp_path):
+    """Sample and object paths are relative to the dataset folder: an absolute path or one that
+    climbs out with .. is a one-line error naming the manifest and the entry."""
+    import shutil
+
+    from reconphys.data.storage import read_manifest
+
+    good = json.loads((reference / "manifest.json").read_text())
+    for table, key, value in (
+        ("samples", "dir", "/etc"),
+        ("samples", "videos", ["samples/x/view_0.mp4", "../../secret/view_1.mp4"]),
+        ("objects", "dir", "objects/../../elsewhere"),
+    ):
+        root = tmp_path / f"{table}-{key}"
+        shutil.copytree(reference, root)
+        bad = json.loads(json.dumps(good))
+        bad[table][0][key] = value
+        (root / "manifest.json").write_text(json.dumps(bad))
+        with pytest.raises(InputError, match=rf"{table}\[0\]\.{key}\]: .*outside the dataset"):
+            read_manifest(root)
+        result = runner.invoke(app, ["data", "show", str(root)])
+        assert result.exit_code == 2 and "outside the dataset folder" in result.output
+    assert read_manifest(reference)["samples"][0]["dir"] == good["samples"][0]["dir"]
+
+
 def test_tossed_objects_slide_and_stay_in_view(tmp_path):
     """A toss (docs/design.md#attribute-ranges): the object slides across the views and stays in
     all of them (visible in every view and frame, its centroid projected inside the middle 80 % of

@@ -21,7 +21,12 @@ from reconphys.data.generate import dataset_cameras, generate_sample, render_vie
 from reconphys.data.settings import make_settings
 from reconphys.errors import InputError
 from reconphys.models import shipped
-from reconphys.models.physics_predictor import PhysicsPredictor, PredictorConfig
+from reconphys.models.physics_predictor import (
+    PhysicsPredictor,
+    PredictorConfig,
+    PredictorEnsemble,
+    attributes_from_unit,
+)
 from reconphys.models.shipped import (
     ENV_VAR,
     SHIPPED_PATH,
@@ -87,6 +92,36 @@ def test_a_missing_shipped_model_says_how_to_train_one(tmp_path, monkeypatch):
     assert ENV_VAR in message and "\n" not in message
     with pytest.raises(InputError, match="model file not found"):
         load_predictor(tmp_path / "other.safetensors")
+
+
+def test_an_ensemble_answers_the_mean_of_its_members_and_round_trips(tmp_path):
+    """members = 3: the unit outputs (log m, log k, log d, f scaled) are the members' mean, so
+    log k/m is the mean of theirs; saved with "members" in its JSON, loaded back the same; a
+    "members" that is not a whole number ≥ 1 is a one-line error."""
+    torch.manual_seed(0)
+    ensemble = PredictorEnsemble(TINY, 3).eval()
+    frames = torch.rand(2, 3, 16, 16, 3)
+    with torch.no_grad():
+        out = ensemble(frames)
+        singles = [member(frames) for member in ensemble.members]
+    assert out["member_unit"].shape == (3, 2, 4)
+    ratio = torch.stack([torch.log(o["stiffness"] / o["mass"]) for o in singles]).mean(0)
+    assert torch.allclose(torch.log(out["stiffness"] / out["mass"]), ratio, rtol=1e-5)
+    mean = torch.stack([o["unit"] for o in singles]).mean(0)
+    assert torch.allclose(out["friction"], attributes_from_unit(mean)["friction"])
+    path = save_predictor(
+        ensemble, tmp_path / "e.safetensors", model_metadata(TINY, 0, 0.03, members=3)
+    )
+    loaded = load_predictor(path)
+    assert isinstance(loaded.model, PredictorEnsemble) and len(loaded.model.members) == 3
+    assert torch.allclose(loaded.predict(frames)["unit"], out["unit"], atol=1e-6)
+    meta = json.loads(path.with_suffix(".json").read_text())
+    for bad in (0, 2.5, "3"):
+        path.with_suffix(".json").write_text(json.dumps(dict(meta, members=bad)))
+        with pytest.raises(InputError, match=r"e\.json \[members\]: expected a whole number"):
+            load_predictor(path)
+    with pytest.raises(ValueError, match="at least 2"):
+        PredictorEnsemble(TINY, 1)
 
 
 def test_bad_files_are_one_line_errors(saved):

@@ -333,6 +333,42 @@ def test_empty_mask(bundle, tmp_path):
     )
 
 
+def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (32 × 32)
+    mask = np.zeros((32, 32), np.uint8)
+    mask[top : top + 6, 13:19] = 255
+    return mask
+
+
+@pytest.mark.parametrize(
+    "mask_of, expected",
+    [
+        (lambda t: np.full((32, 32), 255, np.uint8), "covers 100% of frame 0: that is background"),
+        (lambda t: np.pad(np.full((4, 32), 255, np.uint8), ((26, 2), (0, 0))),
+         "spans frame 0 from edge to edge"),
+        (lambda t: _square(t), "does not move (every frame overlaps frame 0 by IoU ≥ 1.00)"),
+        (lambda t: _square(t) if t < 3 else np.zeros((32, 32), np.uint8),
+         "the object is found in only 3 of 30 frames"),
+    ],
+)  # fmt: skip
+def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
+    """Masks that cannot be one released object (background, a static region, an object that is
+    not there) are refused with what to give instead, and no asset; a square that falls 2 px a
+    frame (then rests) passes the same checks."""
+    from reconphys.capture.masks import check_masks
+
+    frames = _frame_folder(bundle, tmp_path)
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for t in range(30):
+        imageio.imwrite(masks / f"{t:03d}.png", mask_of(t))
+    _fails([frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply"], tmp_path, expected)
+    result, _ = _predict([frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply"],
+                         tmp_path)  # fmt: skip
+    assert "--masks DIR (one image per frame) or a clean plate with --background" in result.output
+    falling = np.stack([_square(t, top=min(2 * t, 24)) for t in range(30)]) / 255.0
+    check_masks(torch.from_numpy(falling).float(), "falling")  # no error
+
+
 @pytest.mark.parametrize(
     "change, expected",
     [
@@ -351,6 +387,78 @@ def test_camera_file_with_wrong_shapes(bundle, tmp_path, change, expected):
         tmp_path,
         expected,
     )
+
+
+def _hull(bundle, tmp_path, stretch=(1.0, 1.0, 1.0)):
+    """The convex hull of the true Gaussians' visible extent (each centre ± 1.5 σ along the axes:
+    these 300 Gaussians are large), in frame 0's pose (optionally stretched about its centre): a
+    mesh a user could give."""
+    import trimesh
+
+    from reconphys.assets.ply import read_ply
+
+    gaussians = read_ply(bundle / "gaussians.ply")
+    sigma = gaussians.scales.double().numpy()[:, None, :]
+    axes = np.concatenate([np.eye(3), -np.eye(3)])[None]  # [1, 6, 3]
+    points = (gaussians.means.double().numpy()[:, None, :] + 1.5 * sigma * axes).reshape(-1, 3)
+    centre = points.mean(0)
+    points = centre + (points - centre) * np.array(stretch)
+    path = tmp_path / f"hull-{'-'.join(map(str, stretch))}.obj"
+    trimesh.convex.convex_hull(points).export(path)
+    return path
+
+
+def test_a_mesh_in_frame_0s_pose_is_used_as_it_is(bundle, tmp_path):
+    """predict --mesh: a mesh in frame 0's pose is kept where it is (placement as-is, its
+    silhouette matches); make-asset --keep-pose keeps it where it is too (no centring, scaling,
+    rotation or lifting), while the default puts its lowest point at --height."""
+    from reconphys.assets.asset import read_asset
+
+    hull = _hull(bundle, tmp_path)
+    result, out = _predict([bundle / "video.mp4", "--camera", bundle / "camera.json",
+                            "--mesh", hull, "--no-refine", "--preview-frames", "0"],
+                           tmp_path)  # fmt: skip
+    assert result.exit_code == 0, result.output
+    details = json.loads((out / "prediction.json").read_text())
+    assert details["placement"] == "as-is" and details["silhouette_iou_given"] >= 0.6
+    assert details["geometry"].endswith("(mesh)")
+    import trimesh
+
+    bounds = trimesh.load(hull).bounds
+    kept = tmp_path / "kept"
+    made = runner.invoke(app, ["make-asset", str(kept), "--mesh", str(hull), "--keep-pose",
+                               "--num-gaussians", "500", "--num-anchors", "32"])  # fmt: skip
+    assert made.exit_code == 0, made.output
+    means = read_asset(kept).gaussians.means.double().numpy()
+    assert np.allclose(means.min(0), bounds[0], atol=0.02)
+    assert np.allclose(means.max(0), bounds[1], atol=0.02)
+    moved = tmp_path / "moved"
+    made = runner.invoke(app, ["make-asset", str(moved), "--mesh", str(hull), "--no-rotate",
+                               "--num-gaussians", "500", "--num-anchors", "32"])  # fmt: skip
+    assert made.exit_code == 0, made.output
+    assert read_asset(moved).gaussians.means[:, 2].min() == pytest.approx(0.3, abs=0.02)
+    shape = runner.invoke(app, ["make-asset", str(tmp_path / "s"), "--shape", "torus",
+                                "--keep-pose"])  # fmt: skip
+    assert shape.exit_code == 2 and "a procedural shape has no pose" in shape.output
+    import trimesh as tm
+
+    sunk = tmp_path / "sunk.obj"
+    tm.creation.box(extents=(0.2, 0.2, 0.2)).export(sunk)  # centred on z = 0: half below ground
+    result = runner.invoke(app, ["make-asset", str(tmp_path / "k"), "--mesh", str(sunk),
+                                 "--keep-pose"])  # fmt: skip
+    assert result.exit_code == 2 and "0.100 m below the ground" in result.output
+
+
+def test_a_geometry_that_does_not_match_frame_0_is_refused(bundle, tmp_path):
+    """A mesh or PLY whose silhouette cannot be made to match frame 0's mask (here the object
+    squashed into a pancake: 4× wider, 10× flatter) is refused — as given and after moving it
+    onto the mask — with no asset, instead of being kept silently."""
+    bad = _hull(bundle, tmp_path, stretch=(4.0, 4.0, 0.1))
+    common = [bundle / "video.mp4", "--camera", bundle / "camera.json", "--mesh", bad,
+              "--no-refine", "--preview-frames", "0"]  # fmt: skip
+    _fails([*common, "--placement", "as-is"], tmp_path, "does not match the object in frame 0")
+    _fails(common, tmp_path, "after moving it onto the mask, needs ≥ 0.6")
+    _fails([*common, "--gaussians", bundle / "gaussians.ply"], tmp_path, "not both")
 
 
 def test_video_without_geometry_or_3dgs_predictor(bundle, tmp_path):

@@ -331,6 +331,38 @@ def test_data_objects_keeps_the_first_objects_and_supervised_skips_assets(folder
     assert load_predictor(tmp_path / "track").model.config.inputs == "track"
 
 
+def test_members_train_one_run_per_seed_and_write_their_ensemble(folder, tmp_path):
+    """train.members = 2: OUT/member-0 and member-1 are ordinary runs with seeds s and s + 1
+    (different weights); OUT/model.safetensors is their ensemble and answers their mean; a second
+    call resumes both members (nothing to train) and writes the same ensemble."""
+    config = tiny(
+        tmp_path / "ens", f"data.source={folder}", "objective.kind=supervised",
+        "model.inputs=track", "model.track_channels=8", "train.steps=2", "train.seed=5",
+        "train.members=2",
+    )  # fmt: skip
+    result = train(config, progress=False, log=lambda line: None)
+    members = [load_predictor(tmp_path / "ens" / f"member-{i}") for i in range(2)]
+    assert [m.metadata["training"]["seed"] for m in members] == [5, 6]
+    first, second = (m.model.state_dict() for m in members)
+    assert any(not torch.equal(first[k], second[k]) for k in first)
+    ensemble = load_predictor(tmp_path / "ens")
+    assert ensemble.metadata["members"] == 2 and result.step == 2
+    assert [m["seed"] for m in ensemble.metadata["training"]["members"]] == [5, 6]
+    frames = torch.rand(1, members[0].num_frames, 32, 32, 3)
+    mean = torch.stack([m.predict(frames)["unit"] for m in members]).mean(0)
+    assert torch.allclose(ensemble.predict(frames)["unit"], mean, atol=1e-6)
+    again = train(config, progress=False, log=lambda line: None)
+    assert again.records == [] and torch.allclose(
+        load_predictor(tmp_path / "ens").predict(frames)["unit"], mean, atol=1e-6
+    )
+    fine_tune = tiny(
+        tmp_path / "fine", f"data.source={folder}", f"train.init={tmp_path / 'ens'}",
+        "objective.kind=supervised", "model.inputs=track", "model.track_channels=8",
+    )  # fmt: skip
+    with pytest.raises(InputError, match="an ensemble; start from one of its members"):
+        train(fine_tune, progress=False, log=lambda line: None)
+
+
 def test_predicted_geometry_trains_on_the_3dgs_predictors_assets(folder, tmp_path):
     """data.geometry = predicted: each video's asset is what `predict` builds from its frame 0
     with the frozen 3DGS predictor (built once per video), and a mixed step runs through it."""

@@ -181,11 +181,12 @@ def mesh_to_gaussians(
     mesh_or_path: trimesh.Trimesh | str | os.PathLike,
     num_gaussians: int = 20000,
     seed: int = 0,
-    size: float = 0.5,
+    size: float | None = 0.5,
     interior_fraction: float = 0.3,
     texture: str = "auto",
 ) -> Gaussians:
-    """Gaussians ``[num_gaussians]`` (float32, CPU) sampled from a mesh, normalised to ``size``.
+    """Gaussians ``[num_gaussians]`` (float32, CPU) sampled from a mesh, normalised to ``size``
+    (or where the file puts them, ``size=None``).
 
     Args:
         mesh_or_path: a ``trimesh.Trimesh`` (left unchanged) or a mesh file path.
@@ -193,7 +194,8 @@ def mesh_to_gaussians(
             the rest lie on the surface. If the mesh cannot be filled, all lie on the surface.
         seed: all randomness derives from it (samples, jitter, procedural colours).
         size: largest side of the mesh's bounding box after normalisation, metres; the box is
-            centred on the origin (mesh frame kept: no rotation).
+            centred on the origin (mesh frame kept: no rotation). None: the mesh's own
+            coordinates, taken as metres (a mesh already in its pose and size, e.g. frame 0's).
         interior_fraction: in [0, 1).
         texture: "auto" (mesh colours when they vary over the surface, else "checker"), "mesh"
             (mesh colours, even uniform ones; error if it has none), or a procedural texture
@@ -205,7 +207,7 @@ def mesh_to_gaussians(
     if texture not in MESH_TEXTURES:
         valid = ", ".join(MESH_TEXTURES)
         raise InputError(f"unknown texture {texture!r}; expected one of: {valid}", field="texture")
-    check_sampling_args(num_gaussians, size, interior_fraction)
+    check_sampling_args(num_gaussians, 1.0 if size is None else size, interior_fraction)
     if int(seed) != seed or seed < 0:
         raise InputError(f"must be a non-negative integer, got {seed}", field="seed")
     if isinstance(mesh_or_path, trimesh.Trimesh):
@@ -215,7 +217,11 @@ def mesh_to_gaussians(
     _validate(mesh, source)
 
     lower, upper = mesh.bounds
-    center, factor = 0.5 * (lower + upper), size / float((upper - lower).max())
+    if size is None:  # as given: no centring, no scaling
+        size = float((upper - lower).max())
+        center, factor = np.zeros(3), 1.0
+    else:
+        center, factor = 0.5 * (lower + upper), size / float((upper - lower).max())
     geometry = trimesh.Trimesh((mesh.vertices - center) * factor, mesh.faces, process=False)
 
     rng = np.random.default_rng(seed)

@@ -21,8 +21,10 @@ from ._common import (
 
 app = typer.Typer()
 
+GROUND_TOLERANCE = 1e-3  # metres a kept pose may reach below the ground (z = 0): rounding only
 
-def _make_gaussians(shape, mesh, ply, num_gaussians, seed, size):
+
+def _make_gaussians(shape, mesh, ply, num_gaussians, seed, size, keep_pose=False):
     from ..assets.mesh import mesh_to_gaussians
     from ..assets.normalize import normalize_gaussians
     from ..assets.ply import read_ply
@@ -32,10 +34,14 @@ def _make_gaussians(shape, mesh, ply, num_gaussians, seed, size):
     if len(sources) != 1:
         raise InputError("give exactly one of --shape, --mesh or --ply", field="source")
     if shape is not None:
+        if keep_pose:
+            raise InputError("a procedural shape has no pose of its own: give --mesh or --ply",
+                             field="--keep-pose")  # fmt: skip
         return make_procedural_gaussians(shape, num_gaussians, seed=seed, size=size)
     if mesh is not None:
-        return mesh_to_gaussians(mesh, num_gaussians, seed=seed, size=size)
-    return normalize_gaussians(read_ply(ply), size)
+        return mesh_to_gaussians(mesh, num_gaussians, seed=seed, size=None if keep_pose else size)
+    gaussians = read_ply(ply)
+    return gaussians if keep_pose else normalize_gaussians(gaussians, size)
 
 
 @app.command("make-asset")
@@ -61,12 +67,19 @@ def make_asset(
     angular_velocity: tuple[float, float, float] = typer.Option((0.0, 0.0, 0.0), help="rad/s"),
     seed: int = typer.Option(0, help="Seed for sampling and the random orientation."),
     no_rotate: bool = typer.Option(False, "--no-rotate", help="Keep the object's orientation."),
+    keep_pose: bool = typer.Option(
+        False,
+        "--keep-pose",
+        help="Keep the mesh or PLY exactly where it is (world frame, metres, z up, ground z = 0; "
+        "e.g. the first frame's pose): no centring, scaling, rotation or lifting (--size, "
+        "--height and --no-rotate do not apply).",
+    ),
     object_id: str = typer.Option(None, help="Identifier that seeds the anchors (default: name)."),
     overwrite: bool = typer.Option(False, help="Replace an existing asset folder."),
 ):
     """Build an asset folder from a procedural shape, a mesh or a Gaussian PLY."""
     from ..assets.asset import PhysicsSettings, write_asset
-    from ..assets.build import place_for_drop
+    from ..assets.build import build_asset, place_for_drop
     from ..assets.procedural import SHAPES
 
     if list_shapes:
@@ -80,7 +93,7 @@ def make_asset(
     if not 0 <= restitution <= 1:
         raise InputError(f"must be in [0, 1], got {restitution}", field="--restitution")
     check_new_output(out, overwrite)
-    gaussians = _make_gaussians(shape, mesh, ply, num_gaussians, seed, size)
+    gaussians = _make_gaussians(shape, mesh, ply, num_gaussians, seed, size, keep_pose)
     physics = PhysicsSettings(
         mass=mass,
         stiffness=stiffness,
@@ -92,9 +105,17 @@ def make_asset(
         num_neighbors=neighbors,
         object_id=object_id or (shape or Path(mesh or ply).stem),
     )
-    asset = place_for_drop(
-        gaussians, height, seed, physics, linear_velocity, angular_velocity, not no_rotate
-    )
+    if keep_pose:
+        lowest = float(gaussians.means[:, 2].min())
+        if lowest < -GROUND_TOLERANCE:
+            source = str(mesh or ply)
+            raise InputError(f"its lowest point is {-lowest:.3f} m below the ground (z = 0): "
+                             "give it in world coordinates, z up", source=source)  # fmt: skip
+        asset = build_asset(gaussians, physics, linear_velocity, angular_velocity)
+    else:
+        asset = place_for_drop(
+            gaussians, height, seed, physics, linear_velocity, angular_velocity, not no_rotate
+        )
     write_asset(asset, out, overwrite=overwrite)
     typer.echo(
         f"wrote {out}: {asset.gaussians.num_gaussians} Gaussians, {asset.num_anchors} anchors, "

@@ -38,6 +38,11 @@ def predict_command(
     gaussians: Path = typer.Option(
         None, help="Gaussian PLY of the object (default: predicted from frame 0)."
     ),
+    mesh: Path = typer.Option(
+        None,
+        help="Instead of --gaussians: the object's mesh (.obj/.glb/.stl/...) in frame 0's pose, "
+        "in the camera file's world frame, metres.",
+    ),
     masks: Path = typer.Option(None, help="Folder of object masks, one image per frame."),
     background: Path = typer.Option(None, help="Clean plate image for background subtraction."),
     camera: Path = typer.Option(None, help="Camera JSON (K, world_to_cam, ground_height)."),
@@ -51,7 +56,11 @@ def predict_command(
         "predicted (the 3DGS predictor even for a dataset sample).",
     ),
     gs_model: Path = typer.Option(None, help="3DGS predictor (default: the shipped one)."),
-    placement: str = typer.Option("auto", help="Given PLY: auto, as-is or fit (to frame 0)."),
+    placement: str = typer.Option(
+        "auto",
+        help="Given PLY or mesh: auto, as-is or fit (moved onto frame 0's mask); refused when "
+        "its silhouette still does not match the mask (IoU < 0.6).",
+    ),
     ground: str = typer.Option(
         "camera", help="Ground plane: camera (its file's ground_height, else 0) or landed."
     ),
@@ -87,6 +96,7 @@ def predict_command(
     result = predict(
         input,
         gaussians=gaussians,
+        mesh=mesh,
         masks=masks,
         background=background,
         camera=camera,

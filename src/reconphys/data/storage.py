@@ -20,7 +20,7 @@ import json
 import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 import torch
@@ -341,5 +341,33 @@ def read_manifest(root: Path, name: str = MANIFEST) -> dict:
     for key in ("settings", "samples", "objects", "complete"):
         if key not in manifest:
             raise InputError("missing", source=str(path), field=key)
+    _check_inside(manifest, str(path))
     manifest["parsed_settings"] = DataSettings.from_dict(manifest["settings"], str(path))
     return manifest
+
+
+SAMPLE_PATHS = ("dir", "object_dir", "frames", "trajectory", "videos")  # relative to the folder
+
+
+def _check_inside(manifest: dict, source: str) -> None:
+    """Refuse a manifest whose sample or object paths leave the dataset folder (absolute, or
+    through ``..``): a dataset reads and writes only below its own root."""
+    entries = [("samples", i, e, SAMPLE_PATHS) for i, e in enumerate(manifest["samples"])]
+    entries += [("objects", i, e, ("dir",)) for i, e in enumerate(manifest["objects"])]
+    for table, index, entry, keys in entries:
+        if not isinstance(entry, dict):
+            raise InputError("expected an object", source=source, field=f"{table}[{index}]")
+        for key in keys:
+            values = entry.get(key, [])
+            for value in values if isinstance(values, list) else [values]:
+                where = f"{table}[{index}].{key}"
+                if not isinstance(value, str):
+                    raise InputError(f"expected a relative path, got {value!r}", source, where)
+                parts = PurePosixPath(value.replace("\\", "/")).parts
+                if value.startswith(("/", "\\")) or ":" in value[:3] or ".." in parts:
+                    raise InputError(
+                        f"{value!r} points outside the dataset folder (paths must be relative, "
+                        "without ..)",
+                        source,
+                        where,
+                    )

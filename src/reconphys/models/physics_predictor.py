@@ -366,3 +366,27 @@ class PhysicsPredictor(nn.Module):
             pooled = pooled + self.silhouette(frames)
         unit = torch.sigmoid(self.head(pooled))
         return {"unit": unit, **attributes_from_unit(unit)}
+
+
+class PredictorEnsemble(nn.Module):
+    """Members of one config trained from different seeds; their answer is the mean of the
+    members' unit outputs, i.e. of log m, log k, log d and f — so also of log k/m and log d/m.
+
+    Seeds disagree most where the training data does not pin the answer down, and averaging
+    removes that part of each member's error (docs/training.md "An ensemble of seeds")."""
+
+    def __init__(self, config: PredictorConfig, members: int):
+        super().__init__()
+        if members < 2:
+            raise ValueError(f"members: an ensemble needs at least 2, got {members}")
+        self.members = nn.ModuleList(PhysicsPredictor(config) for _ in range(members))
+
+    @property
+    def config(self) -> PredictorConfig:
+        return self.members[0].config
+
+    def forward(self, frames: Tensor) -> dict[str, Tensor]:
+        """As :meth:`PhysicsPredictor.forward`, plus "member_unit": [M, B, 4] each member's."""
+        units = torch.stack([member(frames)["unit"] for member in self.members])  # [M, B, 4]
+        unit = units.mean(0)
+        return {"unit": unit, **attributes_from_unit(unit), "member_unit": units}

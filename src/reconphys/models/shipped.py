@@ -2,7 +2,9 @@
 
 ``NAME.json`` holds the :class:`~reconphys.models.physics_predictor.PredictorConfig`, what the
 network reads (view, frames, resolution, frame interval), the attribute ranges its bounded heads
-map into, and how it was trained (data, objective, steps, geometry, time). ``reconphys train``
+map into, and how it was trained (data, objective, steps, geometry, time). ``"members": M > 1``
+marks an ensemble of M networks of that config (:class:`PredictorEnsemble`; weights
+``members.I.…``); absent, one network. ``reconphys train``
 writes ``OUT/model.safetensors`` + ``OUT/model.json``; the model shipped with the package lives at
 ``reconphys/weights/physics_predictor.safetensors`` + ``.json``.
 
@@ -27,6 +29,7 @@ from .physics_predictor import (
     LOG_SCALED,
     PhysicsPredictor,
     PredictorConfig,
+    PredictorEnsemble,
     resize_frames,
 )
 
@@ -64,12 +67,14 @@ def model_metadata(
     view: int,
     frame_dt: float,
     training: dict | None = None,
+    members: int = 1,
 ) -> dict:
-    """The contents of ``NAME.json``."""
+    """The contents of ``NAME.json`` (``members`` > 1: an ensemble of that many networks)."""
     return {
         "format": FORMAT,
         "version": VERSION,
         "predictor": config.to_dict(),
+        **({"members": members} if members > 1 else {}),
         "input": {
             "view": view,  # dataset view 0–3 the network was trained on
             "frames": config.num_frames,  # frames 0..frames−1 of the video
@@ -83,7 +88,9 @@ def model_metadata(
     }
 
 
-def save_predictor(model: PhysicsPredictor, path: str | os.PathLike, metadata: dict) -> Path:
+def save_predictor(
+    model: PhysicsPredictor | PredictorEnsemble, path: str | os.PathLike, metadata: dict
+) -> Path:
     """Write ``path`` (.safetensors, float32 weights) and its JSON, each replaced atomically."""
     from safetensors.torch import save_file
 
@@ -104,7 +111,7 @@ def save_predictor(model: PhysicsPredictor, path: str | os.PathLike, metadata: d
 class LoadedPredictor:
     """A predictor ready for inference, with its metadata."""
 
-    model: PhysicsPredictor  # in eval mode
+    model: PhysicsPredictor | PredictorEnsemble  # in eval mode
     metadata: dict  # the contents of NAME.json
     path: Path
     device: torch.device = field(default_factory=lambda: torch.device("cpu"))
@@ -142,6 +149,9 @@ def _read_metadata(path: Path) -> dict:
     for key in ("predictor", "input"):
         if not isinstance(metadata.get(key), dict):
             raise InputError("missing", source=str(json_path), field=key)
+    members = metadata.get("members", 1)
+    if type(members) is not int or members < 1:
+        raise InputError(f"expected a whole number ≥ 1, got {members!r}", str(json_path), "members")
     ranges = metadata.get("attribute_ranges", {})
     for name in ATTRIBUTES:
         if list(ranges.get(name, [])) != list(ATTRIBUTE_RANGES[name]):
@@ -175,7 +185,8 @@ def load_predictor(
     metadata = _read_metadata(path)
     try:
         config = PredictorConfig.from_dict(metadata["predictor"])
-        model = PhysicsPredictor(config)
+        members = metadata.get("members", 1)
+        model = PredictorEnsemble(config, members) if members > 1 else PhysicsPredictor(config)
     except (TypeError, ValueError) as e:
         where = str(config_path(path))
         raise InputError(f"bad predictor config ({e})", where, "predictor") from None

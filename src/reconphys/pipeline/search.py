@@ -13,8 +13,8 @@ inside the attribute ranges (:func:`attributes_of`). Two stages, each a few batc
    (the other two at their best) — a wrong network start far from the truth is caught here, and
    the profile gives the interval: a posterior ∝ exp(−(E − E_min) / (τ·E_min)) over the profile,
    i.e. Gaussian pixel noise whose variance is the best fit's residual, with τ = 2 / (effective
-   number of independent pixels), proportional to the pixels compared and calibrated on training
-   objects at two sizes (:func:`temperature_for`). An
+   number of independent pixels), inversely proportional to the pixels compared, one constant per
+   observable calibrated on training objects at two sizes (:func:`temperature_for`). An
    observable the video does not show (the friction of an object that never slides) has a flat
    profile and comes out as a wide interval; when it is nearly the prior's (:data:`UNDETERMINED`),
    the start value is kept for it instead of a best fit that is noise.
@@ -52,12 +52,13 @@ PROFILE_POINTS = 9  # evenly over each observable's range
 PROFILE_LOCAL = (-1.0, -0.5, -0.2, 0.2, 0.5, 1.0)  # × the last span, around the best
 # Temperature of the profile posterior, relative to the best error: τ = 2 / (effective number of
 # independent pixels), and that number grows with the pixels compared (the window after
-# :func:`comparison_view`), so τ = TEMPERATURE_PIXELS / pixels. Calibrated by
-# ``benchmarks/search_refinement.py --calibrate`` on training meshes of the pybullet source (never
-# a test split): the same 10 meshes × 2 videos at 32 px (~870 pixels compared) and at 128 px
-# (~3650) both put 80 % coverage of the 10–90 % intervals at τ·pixels = 1000 (80 % and 78 %);
+# :func:`comparison_view`), so τ = TEMPERATURE_PIXELS / pixels, one product per observable (the
+# pixels that tell the damping and the friction are fewer than those that tell the bounce).
+# Calibrated by ``benchmarks/search_refinement.py --calibrate`` on 120 videos of training meshes of
+# the pybullet source (never a test split) at 32 px and 128 px: per observable, the product whose
+# 10–90 % intervals cover the truth nearest 80 % of the time (82 % / 81 % / 81 %);
 # docs/training.md "Intervals".
-TEMPERATURE_PIXELS = 1000.0
+TEMPERATURE_PIXELS = (1000.0, 600.0, 600.0)  # log k/m, log d/m, friction
 QUANTILES = (0.1, 0.9)
 # An observable whose interval is at least this share of the prior's own 10–90 % width is not
 # shown by the recording: its best fit is noise (or a wrong geometry compensating), so the start
@@ -180,9 +181,10 @@ def photometric_errors(
     return ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
 
 
-def temperature_for(pixels: int) -> float:
-    """τ of the profile posterior for a compared view of ``pixels`` pixels (≥ 1)."""
-    return TEMPERATURE_PIXELS / max(pixels, 1)
+def temperature_for(pixels: int) -> tuple[float, float, float]:
+    """τ of each observable's profile posterior (log k/m, log d/m, f) for a compared view of
+    ``pixels`` pixels (≥ 1)."""
+    return tuple(product / max(pixels, 1) for product in TEMPERATURE_PIXELS)
 
 
 def profile_interval(
@@ -264,7 +266,8 @@ def search(
     spans: tuple[float, ...] = SPANS,
     candidates: int = CANDIDATES,
     profiles: bool = True,  # stage 2: global check and intervals
-    temperature: float | None = None,  # of the intervals; None: temperature_for(compared pixels)
+    temperature: float | tuple[float, float, float] | None = None,  # of the intervals, one or
+    # one per observable; None: temperature_for(compared pixels)
     masks: Tensor | None = None,  # [T, H, W] the object's masks: compare only around them
 ) -> tuple[Asset, dict]:
     """Coordinate search from the asset's attributes, then profiles → (asset with the best, history
@@ -279,6 +282,8 @@ def search(
     size = list(frames.shape[1:3])
     if temperature is None:
         temperature = temperature_for(size[0] * size[1])
+    elif isinstance(temperature, (int, float)):
+        temperature = (float(temperature),) * 3
     bounds = observable_bounds()
     start = observables(asset.physics)
     current = torch.maximum(torch.minimum(start, bounds[:, 1]), bounds[:, 0])
@@ -333,7 +338,7 @@ def search(
             coordinate_search(spans[1:])
             moved, found = profile_pass()
         intervals = {
-            name: list(profile_interval(v, e, tuple(bounds[i].tolist()), temperature))
+            name: list(profile_interval(v, e, tuple(bounds[i].tolist()), temperature[i]))
             for i, (name, (v, e)) in enumerate(zip(OBSERVABLES, found, strict=True))
         }
         prior_width = (QUANTILES[1] - QUANTILES[0]) * (bounds[:, 1] - bounds[:, 0])
@@ -360,7 +365,7 @@ def search(
         "intervals": intervals,  # 10–90 % of the profile posterior (natural logs of SI ratios)
         "undetermined": undetermined,  # observables the recording does not show: start kept
         "profiles": profile,  # the last profile of each observable
-        "temperature": temperature,
+        "temperature": list(temperature),  # τ of each observable's posterior
         "rounds": rounds,
         "render_size": size,
         "window": window,  # (left, top, width, height) of the recording compared; None: all

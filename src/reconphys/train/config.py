@@ -105,6 +105,9 @@ class RunConfig:
     tensorboard: bool = True  # write OUT/tensorboard when the tensorboard package is installed
     out: str = "runs/train"  # output folder: checkpoint, logs, exported model
     init: str = ""  # weights to start from (a model .safetensors or a training OUT); "": random
+    # > 1: train that many networks, seeds seed, seed + 1, …, each into OUT/member-I (a run of
+    # its own: resumable), then write their ensemble (the mean answer) to OUT/model.safetensors
+    members: int = 1
 
 
 @dataclass
@@ -310,6 +313,7 @@ def _validate(config: TrainConfig) -> None:
     _require(r.steps >= 1, "train.steps", f"must be ≥ 1, got {r.steps}")
     _require(r.batch_size >= 1, "train.batch_size", f"must be ≥ 1, got {r.batch_size}")
     _require(r.seed >= 0, "train.seed", f"must be ≥ 0, got {r.seed}")
+    _require(r.members >= 1, "train.members", f"must be ≥ 1, got {r.members}")
     device_ok = r.device in ("auto", "cpu", "cuda") or (
         r.device.startswith("cuda:") and r.device[5:].isdigit()
     )

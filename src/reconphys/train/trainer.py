@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import random
 import shutil
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +48,7 @@ from torch.utils.data import DataLoader
 from .. import __version__
 from ..errors import InputError
 from ..io import atomic_file
-from ..models.physics_predictor import PhysicsPredictor, resize_frames
+from ..models.physics_predictor import PhysicsPredictor, PredictorEnsemble, resize_frames
 from ..models.shipped import (
     TRAINED_NAME,
     LoadedPredictor,
@@ -75,7 +76,7 @@ class TrainResult:
     out: Path
     step: int  # optimiser steps done in total
     first_step: int  # the first step this call ran (1 for a fresh run)
-    model: PhysicsPredictor  # the trained network (unwrapped, on the training device)
+    model: PhysicsPredictor | PredictorEnsemble  # the trained network(s), unwrapped
     records: list[dict] = field(default_factory=list)  # log records of this call's steps
     seconds: float = 0.0  # wall-clock of the whole run, earlier parts of a resumed one included
 
@@ -233,6 +234,9 @@ class Trainer:
         """The model ``train.init`` names (fine-tuning), checked against this run's network."""
         loaded = load_predictor(path)
         source = str(loaded.path)
+        if isinstance(loaded.model, PredictorEnsemble):
+            raise InputError("an ensemble; start from one of its members' model.safetensors",
+                             source=source, field="train.init")  # fmt: skip
         if loaded.model.config != self.config.predictor_config():
             raise InputError("its predictor config differs from this run's [model]/[data] "
                              "settings", source=source, field="train.init")  # fmt: skip
@@ -509,5 +513,68 @@ def train(
     log: Callable[[str], None] = print,
 ) -> TrainResult:
     """Train (or continue training) the physics predictor as ``config`` says; see the module
-    docstring. ``callback(step, record)`` runs after every step on every rank."""
+    docstring. ``callback(step, record)`` runs after every step on every rank. With
+    ``train.members`` = M > 1: M runs (seeds seed..seed+M−1) into OUT/member-0..M−1, then their
+    ensemble into OUT/model.safetensors (:func:`train_ensemble`)."""
+    if config.train.members > 1:
+        run = lambda member: train(member, overwrite, progress, callback, log)  # noqa: E731
+        return train_ensemble(config, run, log)
     return Trainer(config, overwrite, progress, callback, log).run()
+
+
+def member_config(config: TrainConfig, index: int) -> TrainConfig:
+    """The run of ensemble member ``index``: its own seed and folder, one network."""
+    run = replace(
+        config.train,
+        seed=config.train.seed + index,
+        out=str(Path(config.train.out) / f"member-{index}"),
+        members=1,
+    )
+    return replace(config, train=run)
+
+
+def train_ensemble(
+    config: TrainConfig,
+    run: Callable[[TrainConfig], TrainResult],  # trains one member's config
+    log: Callable[[str], None] = print,
+) -> TrainResult:
+    """Each member in turn with ``run`` (a finished member is skipped on a second call: each
+    resumes), then
+    OUT/model.safetensors + model.json: the members' weights under ``members.I.`` and their
+    training records under ``training.members``."""
+    out = Path(config.train.out)
+    results = []
+    for index in range(config.train.members):
+        log(
+            f"ensemble member {index + 1}/{config.train.members} (seed {config.train.seed + index})"
+        )
+        results.append(run(member_config(config, index)))
+    if int(os.environ.get("RANK", "0")) != 0:
+        return results[-1]  # under torchrun: rank 0 writes the ensemble
+    loaded = [load_predictor(r.out / TRAINED_NAME) for r in results]
+    ensemble = PredictorEnsemble(loaded[0].model.config, len(loaded))
+    for member, one in zip(ensemble.members, loaded, strict=True):
+        member.load_state_dict(one.model.state_dict())
+    first = loaded[0].metadata
+    training = dict(first["training"])
+    training["members"] = [
+        {
+            "out": str(r.out),
+            "seed": one.metadata["training"].get("seed"),
+            "final_loss": one.metadata["training"].get("final_loss"),
+            "wall_clock_seconds": one.metadata["training"].get("wall_clock_seconds"),
+        }
+        for r, one in zip(results, loaded, strict=True)
+    ]
+    training["wall_clock_seconds"] = round(sum(r.seconds for r in results), 1)
+    training["config"] = config.to_dict()
+    metadata = model_metadata(
+        ensemble.config, first["input"]["view"], first["input"]["frame_dt"], training,
+        members=len(loaded),
+    )  # fmt: skip
+    save_predictor(ensemble.eval(), out / TRAINED_NAME, metadata)
+    last = results[-1]
+    records = [record for r in results for record in r.records]
+    first_step = min(r.first_step for r in results)
+    seconds = sum(r.seconds for r in results)
+    return TrainResult(out, last.step, first_step, ensemble, records, seconds)
