@@ -205,6 +205,7 @@ def test_interrupted_run_resumes_to_identical_files(reference, tmp_path):
     staging = out / "samples" / f".{unwritten}.staging-12345-abcd"
     staging.mkdir()
     (staging / "frames.npz").write_bytes(b"half")
+    (out / ".manifest.12345-abcd.json").write_bytes(b"")  # a manifest write killed half-way
     (out / "samples" / written[1] / "trajectory.npz").unlink()
     assert not storage.sample_is_complete(out, written[1], SMALL)
     with pytest.raises(InputError, match="incomplete or altered"):

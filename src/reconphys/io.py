@@ -131,6 +131,9 @@ def remove_stale_staging(path: str | os.PathLike) -> None:
     for pattern in (f".{path.name}.staging-*", f".{path.name}.old-*"):
         for stale in path.parent.glob(pattern):
             shutil.rmtree(stale, ignore_errors=True)
+    for stale in path.parent.glob(f".{path.stem}.*-*{path.suffix}"):  # atomic_file's temporaries
+        if stale.is_file():
+            stale.unlink(missing_ok=True)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -168,6 +168,7 @@ def make_dataset(
     samples = plan_samples(settings, objects)
     try:
         root.mkdir(parents=True, exist_ok=True)
+        remove_stale_staging(root / manifest_name)  # a manifest write a killed run left half-done
     except OSError as e:
         raise InputError(f"cannot create ({e.strerror})", source=str(root)) from None
     for obj in objects:
