@@ -70,7 +70,8 @@ def main() -> None:
         "--calibrate",
         action="store_true",
         help="print the 10–90 %% coverage for a range of profile temperatures and, per observable, "
-        "the one that covers 80 %% (run it on training objects, not the test split)",
+        "the one that covers 80 %% (run it on objects the model never trained on, not the test "
+        "split: e.g. --skip-objects)",
     )
     args = parser.parse_args()
     if args.rows:  # no search: recalibrate the intervals from stored profiles

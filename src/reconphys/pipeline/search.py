@@ -14,7 +14,8 @@ inside the attribute ranges (:func:`attributes_of`). Two stages, each a few batc
    the profile gives the interval: a posterior ∝ exp(−(E − E_min) / (τ·E_min)) over the profile,
    i.e. Gaussian pixel noise whose variance is the best fit's residual, with τ = 2 / (effective
    number of independent pixels), inversely proportional to the pixels compared, one constant per
-   observable calibrated on training objects at two sizes (:func:`temperature_for`). An
+   observable calibrated on validation meshes the model never trained on
+   (:func:`temperature_for`). An
    observable the video does not show (the friction of an object that never slides) has a flat
    profile and comes out as a wide interval; when it is nearly the prior's (:data:`UNDETERMINED`),
    the start value is kept for it instead of a best fit that is noise.
