@@ -14,7 +14,7 @@ import sys
 import typer
 
 from .. import __version__
-from . import asset, data, evaluate, predict, simulate, train, view
+from . import asset, data, demo, evaluate, predict, simulate, train, view
 
 app = typer.Typer(
     add_completion=False,
@@ -43,7 +43,7 @@ def _main(
     torch.set_flush_denormal(True)
 
 
-for module in (asset, simulate, data, view, evaluate, train, predict):
+for module in (demo, asset, simulate, data, view, evaluate, train, predict):
     app.add_typer(module.app)
 app.add_typer(data.data_app, name="data")
 

@@ -1,10 +1,8 @@
-"""Asset commands: ``make-asset``, ``inspect``, ``export`` and ``demo`` (docs/usage.md)."""
+"""Asset commands: ``make-asset``, ``inspect`` and ``export`` (docs/usage.md)."""
 
 from __future__ import annotations
 
 import json
-import shutil
-import time
 from pathlib import Path
 
 import typer
@@ -13,7 +11,6 @@ from ..errors import InputError
 from ..io import check_new_output
 from ..names import EXPORT_FORMATS
 from ._common import (
-    DEVICE_CHOICES,
     check_non_negative,
     check_positive,
     user_errors,
@@ -175,50 +172,3 @@ def export(
             }
         )
     )
-
-
-@app.command()
-@user_errors
-def demo(
-    out: Path = typer.Option(Path("demo_out"), help="Output folder."),
-    shape: str = typer.Option("bunny", help="Procedural shape."),
-    frames: int = typer.Option(50, help="Frames to simulate (0.03 s each)."),
-    resolution: int = typer.Option(256, help="Video size, pixels."),
-    num_gaussians: int = typer.Option(12000, help="Gaussians of the object."),
-    num_anchors: int = typer.Option(2048, help="Anchors N_A."),
-    device: str = typer.Option("auto", help=f"{DEVICE_CHOICES}."),
-    seed: int = typer.Option(0, help="Seed for the shape and orientation."),
-):
-    """Build a procedural object, drop it, and write OUT/asset, OUT/trajectory.npz and an mp4."""
-    from ..assets.asset import PhysicsSettings, read_asset, write_asset
-    from ..assets.build import place_for_drop
-    from ..assets.procedural import make_procedural_gaussians
-    from ..devices import resolve_device
-    from ..simulate import simulate_to_folder
-
-    torch_device = resolve_device(device)
-    started = time.perf_counter()
-    gaussians = make_procedural_gaussians(shape, num_gaussians, seed=seed)
-    physics = PhysicsSettings(
-        mass=1.0,
-        stiffness=250.0,
-        damping=1.0,
-        friction=0.6,
-        num_anchors=num_anchors,
-        object_id=f"demo-{shape}-{seed}",
-    )
-    asset = place_for_drop(gaussians, 0.35, seed, physics, angular_velocity=(1.5, -2.0, 0.5))
-    asset_dir = out / "asset"
-    if asset_dir.exists():
-        shutil.rmtree(asset_dir)
-    write_asset(asset, asset_dir)
-    typer.echo(
-        f"asset: {asset_dir} ({asset.gaussians.num_gaussians} Gaussians, {asset.num_anchors} "
-        f"anchors, {asset.springs.shape[0]} springs) in {time.perf_counter() - started:.1f} s"
-    )
-    asset = read_asset(asset_dir)  # simulate what was written: the file format is the contract
-    summary = simulate_to_folder(
-        asset, out, frames, True, torch_device, resolution, 0, "auto", False
-    )
-    typer.echo(json.dumps(summary))
-    typer.echo(f"video: {out / 'simulation.mp4'}   preview: {out / 'preview.png'}")
