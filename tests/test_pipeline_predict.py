@@ -244,21 +244,60 @@ def test_fit_to_mask_recovers_a_displaced_object(dataset):
     assert abs(float(error[0])) < 0.15
 
 
-def test_linear_velocity_from_a_rendered_free_fall(dataset):
-    from reconphys.data.dataset import DropDataset
-
-    data = DropDataset(dataset)
-    gaussians = data.asset(0).gaussians  # in view at frame 0, as in the dataset
-    camera = default_camera(96, 96)
-    velocity = torch.tensor([0.0, 0.3, 0.8])  # view 0 looks along −x: y is lateral, z vertical
+def _rendered_fall(gaussians, velocity, size=96, frames=4):
+    camera = default_camera(size, size)
     masks = []
-    for t in range(4):
+    for t in range(frames):
         time = 0.03 * t
         shift = velocity * time + torch.tensor([0.0, 0.0, -4.9 * time**2])
         g = gaussians.with_means(gaussians.means + shift)
-        masks.append((render(g, camera.cameras()).alpha.reshape(96, 96) > 0.5).float())
-    estimate = estimate_linear_velocity(gaussians.means, torch.stack(masks), camera, 0.03)
+        masks.append((render(g, camera.cameras()).alpha.reshape(size, size) > 0.5).float())
+    return torch.stack(masks), camera
+
+
+def test_linear_velocity_from_a_rendered_free_fall(dataset):
+    from reconphys.data.dataset import DropDataset
+
+    gaussians = DropDataset(dataset).asset(0).gaussians  # in view at frame 0, as in the dataset
+    velocity = torch.tensor([0.0, 0.3, 0.8])  # view 0 looks along −x: y is lateral, z vertical
+    masks, camera = _rendered_fall(gaussians, velocity)
+    estimate = estimate_linear_velocity(gaussians.means, masks, camera, 0.03)
     assert abs(float(estimate[1]) - 0.3) < 0.1 and abs(float(estimate[2]) - 0.8) < 0.15
+
+
+def test_velocity_along_the_view_is_read_from_the_growing_mask(dataset):
+    """Motion towards the camera barely moves the centroid; the mask's growth shows it. Released
+    from rest, the estimate stays at rest (issue 23: |v0| ≤ 0.1 m/s)."""
+    from reconphys.data.dataset import DropDataset
+
+    gaussians = DropDataset(dataset).asset(0).gaussians
+    towards = torch.tensor([1.0, 0.0, 0.0])  # +x: towards view 0's camera
+    masks, camera = _rendered_fall(gaussians, towards, size=128, frames=5)
+    estimate = estimate_linear_velocity(gaussians.means, masks, camera, 0.03, frames=5)
+    assert 0.6 < float(estimate[0]) < 1.4, estimate
+    masks, camera = _rendered_fall(gaussians, torch.zeros(3), size=128, frames=5)
+    estimate = estimate_linear_velocity(gaussians.means, masks, camera, 0.03, frames=5)
+    assert float(estimate.norm()) < 0.1, estimate
+
+
+def test_fit_colours_recovers_washed_out_colours(dataset, sample_id):
+    """Grey Gaussians (the 3DGS predictor's failing) fitted to frame 0 regain its colours; their
+    geometry stays."""
+    from dataclasses import replace
+
+    from reconphys.models.reconstruct import fit_colours
+    from reconphys.pipeline.samples import load_sample
+
+    observation, truth = load_sample(dataset, sample_id)
+    placed = truth.asset.gaussians  # the object as frame 0 shows it
+    grey = replace(placed, sh0=torch.zeros_like(placed.sh0))
+    fitted, report = fit_colours(grey, observation)
+    assert report["psnr_after"] > report["psnr_before"] + 3.0, report
+    assert torch.equal(fitted.means, grey.means) and torch.equal(fitted.log_scales, grey.log_scales)
+    seen = placed.opacities > 0.5  # colour error of the Gaussians, before and after the fit
+    before = (grey.colors - placed.colors)[seen].abs().mean()
+    after = (fitted.colors - placed.colors)[seen].abs().mean()
+    assert after < 0.85 * before  # the back of the object, never seen, keeps its grey
 
 
 def test_refine_lowers_the_photometric_loss(dataset, sample_id):

@@ -15,12 +15,12 @@ import pytest
 import torch
 from helpers import make_tiny_dataset
 
+from reconphys.capture.window import object_window
 from reconphys.physics import scene_stable_substeps, stable_substeps
 from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.pipeline.samples import load_sample
 from reconphys.pipeline.search import (
     attributes_of,
-    object_window,
     observable_bounds,
     observables,
     profile_interval,

@@ -17,6 +17,7 @@ TIMING_ORDER = (
     "model_load",
     "decode",
     "gaussians",
+    "colours",
     "physics_network",
     "asset_build",
     "search",

@@ -153,7 +153,7 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
         lines += [
             "",
             f"Initial velocity (m/s): estimated {_vector(velocity)}, true "
-            f"{_vector(true_velocity)} (from the free fall of the mask centroid over frames 0–3; "
+            f"{_vector(true_velocity)} (from the masks' free fall and growth over frames 0–3; "
             "spin is not estimated).",
         ]
     lines += [

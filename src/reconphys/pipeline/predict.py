@@ -33,7 +33,12 @@ from ..capture import Observation
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
 from ..models.model_input import predictor_frames
-from ..models.reconstruct import initial_velocity, observed_asset, predicted_gaussians
+from ..models.reconstruct import (
+    fit_colours,
+    initial_velocity,
+    observed_asset,
+    predicted_gaussians,
+)
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
 from .search import OBSERVABLES, observables
@@ -283,14 +288,20 @@ def predict_observation(
     else:
         placed, gs_path = predicted_gaussians(observation, gs_model)
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
+        if refine:  # part of the fit to the recording: the feed-forward path stays < 1 s
+            colours_started = time.perf_counter()
+            placed, details["colours"] = fit_colours(placed, observation)
+            details["geometry"] += ", colours fitted to it"
+            timings["colours"] = time.perf_counter() - colours_started
+            started += timings["colours"]  # not counted twice in "gaussians"
         object_id = f"predicted-{Path(observation.source).stem}"
     if build_new:
         velocity = initial_velocity(placed, observation)
         details["initial_velocity"] = {
             "linear_m_s": [round(float(x), 4) for x in velocity],
             "angular_rad_s": [0.0, 0.0, 0.0],
-            "how": "free fall of the mask centroid over frames 0–3 (angular velocity not "
-            "estimated)",
+            "how": "free fall of the mask's centroid and growth of its area over frames 0–3 "
+            "(angular velocity not estimated)",
         }
     means = placed.means if build_new else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)

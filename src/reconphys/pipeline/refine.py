@@ -18,9 +18,9 @@ import torch
 
 from ..assets.asset import Asset
 from ..capture import Observation
+from ..capture.window import comparison_view
 from ..physics.model import ATTRIBUTE_RANGES
 from ..render.photometric import SceneBatch, photometric_loss
-from .search import comparison_view
 
 REFINE_LR = 0.05  # Adam step in log k, log d and logit f
 MIN_SUBSTEPS = 25  # as the cpu_small training recipe (configs/cpu_small.toml)
