@@ -179,10 +179,13 @@ if triton is not None:
         other_ptr, spring_ptr, ell_sb, degree,
         rest_ptr, rest_sb, rest_se, k_ptr, k_sb, k_se, d_ptr, d_sb, d_se,
         m_ptr, m_sb, m_se, f_ptr, f_sb, f_se,
-        p, e, g0, g1, g2, ground, h,
+        s_ptr,
         BLOCK: tl.constexpr,
     ):  # fmt: skip
         """One substep for a block of anchors of one scene (see reference.step)."""
+        p, e = tl.load(s_ptr), tl.load(s_ptr + 1)  # scalars in the model's dtype (see below)
+        g0, g1, g2 = tl.load(s_ptr + 2), tl.load(s_ptr + 3), tl.load(s_ptr + 4)
+        ground, h = tl.load(s_ptr + 5), tl.load(s_ptr + 6)
         b = tl.program_id(1)
         n = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
         mask = n < num_anchors
@@ -218,11 +221,14 @@ if triton is not None:
         other_ptr, spring_ptr, ell_sb, degree,
         rest_ptr, rest_sb, rest_se, k_ptr, k_sb, k_se, d_ptr, d_sb, d_se,
         m_ptr, m_sb, m_se, f_ptr, f_sb, f_se, gm_acc_ptr, gf_acc_ptr,
-        p, e, g0, g1, g2, ground, h,
+        s_ptr,
         BLOCK: tl.constexpr,
     ):  # fmt: skip
         """VJP of contact and integration, in place: (gx, gv) after the substep become the
         direct terms before it; dL/dF goes to gforce; mass and friction gradients accumulate."""
+        p, e = tl.load(s_ptr), tl.load(s_ptr + 1)  # scalars in the model's dtype (see below)
+        g0, g1, g2 = tl.load(s_ptr + 2), tl.load(s_ptr + 3), tl.load(s_ptr + 4)
+        ground, h = tl.load(s_ptr + 5), tl.load(s_ptr + 6)
         b = tl.program_id(1)
         n = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
         mask = n < num_anchors
@@ -281,10 +287,11 @@ if triton is not None:
         x_ptr, v_ptr, gx_ptr, gv_ptr, gforce_ptr, num_anchors, num_springs,
         other_ptr, spring_ptr, ell_sb, degree,
         rest_ptr, rest_sb, rest_se, k_ptr, k_sb, k_se, d_ptr, d_sb, d_se,
-        gk_acc_ptr, gd_acc_ptr, gr_acc_ptr, p,
+        gk_acc_ptr, gd_acc_ptr, gr_acc_ptr, s_ptr,
         BLOCK: tl.constexpr,
     ):  # fmt: skip
         """VJP of the spring forces, in place on (gx, gv); per-spring gradients accumulate."""
+        p = tl.load(s_ptr)  # the spring exponent, in the model's dtype
         b = tl.program_id(1)
         n = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
         mask = n < num_anchors
@@ -390,15 +397,14 @@ class TritonEngine(BackwardEngine):
             "rest_length": torch.zeros(batch, e_size, dtype=dtype, device=device),
         }
         gravity = model.gravity
-        self.scalars = (
-            model.spring_exponent,
-            model.restitution,
-            gravity[0],
-            gravity[1],
-            gravity[2],
-            model.ground_height,
-            dt,
-        )
+        # A Python float reaches a Triton kernel as fp32, so a float64 model would step with
+        # dt and g rounded to fp32 (relative error ~1e-8, seen on an H100): the scalars travel
+        # as a tensor of the model's dtype instead.
+        self.scalars = torch.tensor(
+            [model.spring_exponent, model.restitution, *(float(g) for g in gravity),
+             model.ground_height, dt],
+            dtype=dtype, device=device,
+        )  # fmt: skip
 
     def _springs_args(self):
         rest, k, d = self.rest, self.k, self.d
@@ -411,7 +417,7 @@ class TritonEngine(BackwardEngine):
         x_out, v_out = torch.empty_like(x), torch.empty_like(v)
         _substep_kernel[self.grid](
             x, v, x_out, v_out, self.num_anchors, *self._springs_args(),
-            *self.m, *self.f, *self.scalars, BLOCK=BLOCK_ANCHORS,
+            *self.m, *self.f, self.scalars, BLOCK=BLOCK_ANCHORS,
         )  # fmt: skip
         return x_out, v_out
 
@@ -422,13 +428,13 @@ class TritonEngine(BackwardEngine):
         totals = self.totals
         _contact_vjp_kernel[self.grid](
             x, v, grad_x, grad_v, grad_force, self.num_anchors, *self._springs_args(),
-            *self.m, *self.f, totals["mass"], totals["friction"], *self.scalars,
+            *self.m, *self.f, totals["mass"], totals["friction"], self.scalars,
             BLOCK=BLOCK_ANCHORS,
         )  # fmt: skip
         _spring_vjp_kernel[self.grid](
             x, v, grad_x, grad_v, grad_force, self.num_anchors, self.num_springs,
             *self._springs_args(), totals["stiffness"], totals["damping"],
-            totals["rest_length"], self.model.spring_exponent, BLOCK=BLOCK_ANCHORS,
+            totals["rest_length"], self.scalars, BLOCK=BLOCK_ANCHORS,
         )  # fmt: skip
         return grad_x, grad_v
 
