@@ -280,26 +280,6 @@ def test_velocity_along_the_view_is_read_from_the_growing_mask(dataset):
     assert float(estimate.norm()) < 0.1, estimate
 
 
-def test_fit_colours_recovers_washed_out_colours(dataset, sample_id):
-    """Grey Gaussians (the 3DGS predictor's failing) fitted to frame 0 regain its colours; their
-    geometry stays."""
-    from dataclasses import replace
-
-    from reconphys.models.reconstruct import fit_colours
-    from reconphys.pipeline.samples import load_sample
-
-    observation, truth = load_sample(dataset, sample_id)
-    placed = truth.asset.gaussians  # the object as frame 0 shows it
-    grey = replace(placed, sh0=torch.zeros_like(placed.sh0))
-    fitted, report = fit_colours(grey, observation)
-    assert report["psnr_after"] > report["psnr_before"] + 3.0, report
-    assert torch.equal(fitted.means, grey.means) and torch.equal(fitted.log_scales, grey.log_scales)
-    seen = placed.opacities > 0.5  # colour error of the Gaussians, before and after the fit
-    before = (grey.colors - placed.colors)[seen].abs().mean()
-    after = (fitted.colors - placed.colors)[seen].abs().mean()
-    assert after < 0.85 * before  # the back of the object, never seen, keeps its grey
-
-
 def test_refine_lowers_the_photometric_loss(dataset, sample_id):
     from dataclasses import replace
 

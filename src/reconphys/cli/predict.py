@@ -17,7 +17,6 @@ TIMING_ORDER = (
     "model_load",
     "decode",
     "gaussians",
-    "colours",
     "physics_network",
     "asset_build",
     "search",

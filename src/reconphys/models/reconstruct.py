@@ -1,6 +1,6 @@
 """Assets from predicted geometry (docs/design.md#data-flow, docs/design.md#asset-format): the 3DGS
-predictor's Gaussians from frame 0 (their colours fitted to it, :func:`fit_colours`), the initial
-linear velocity from the masks' free fall, and the asset built from them.
+predictor's Gaussians from frame 0, the initial linear velocity from the masks' free fall, and the
+asset built from them.
 
 Below both training (``data.geometry = "predicted"``, :mod:`reconphys.train.data`) and the user's
 path (:mod:`reconphys.pipeline.predict`), so that neither imports the other.
@@ -8,9 +8,7 @@ path (:mod:`reconphys.pipeline.predict`), so that neither imports the other.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -21,13 +19,8 @@ from ..assets.build import build_from_gaussians
 from ..assets.gaussians import Gaussians
 from ..capture import Observation
 from ..capture.placement import estimate_linear_velocity
-from ..capture.window import comparison_view, object_window
 from ..errors import InputError
 from .model_input import predictor_frames, virtual_intrinsics
-
-COLOUR_STEPS = 40  # Adam steps of fit_colours (~2 s for a few hundred Gaussians on 2 cores)
-COLOUR_LR = 0.2  # on the SH degree-0 coefficients (colour = 0.5 + 0.28 · sh0)
-COLOUR_RESOLUTION = 64  # longest side of the compared window, pixels
 
 
 def initial_velocity(gaussians: Gaussians, observation: Observation) -> Tensor:  # [3] m/s
@@ -113,45 +106,3 @@ def predicted_gaussians(observation: Observation, gs_model=None):
     except ValueError as e:
         raise InputError(str(e), source=observation.source) from None
     return pruned.map(lambda t: t.detach().float()), loaded.path
-
-
-def fit_colours(
-    gaussians: Gaussians,  # world frame, placed on frame 0's object
-    observation: Observation,
-    steps: int = COLOUR_STEPS,
-    resolution: int = COLOUR_RESOLUTION,
-) -> tuple[Gaussians, dict]:
-    """The Gaussians with their colours (SH degree 0) fitted to frame 0 by gradient descent on
-    the squared error of their render in the object's window → (Gaussians, {"psnr_before",
-    "psnr_after" (dB, the window of frame 0), "steps"}). Positions, shapes and opacities stay:
-    the 3DGS predictor's colours are washed out (grey), and a search that compares renders with
-    the recording reads the physics better when the object looks like itself."""
-    from ..render import render
-
-    window = object_window(observation.masks[:1])
-    frames, camera = comparison_view(observation.frames[:1], observation.camera, resolution,
-                                     window)  # fmt: skip
-    target, cameras = frames[0], camera.cameras()
-
-    def error(sh0: Tensor) -> Tensor:
-        return ((render(replace(gaussians, sh0=sh0), cameras).rgb[0] - target) ** 2).mean()
-
-    sh0 = gaussians.sh0.detach().clone().requires_grad_(True)
-    optimizer = torch.optim.Adam([sh0], lr=COLOUR_LR)
-    with torch.no_grad():
-        before = float(error(sh0))
-    for _ in range(steps):
-        optimizer.zero_grad()
-        loss = error(sh0)
-        loss.backward()
-        optimizer.step()
-    with torch.no_grad():
-        after = float(error(sh0))
-    if not after < before:  # never worse than the predictor's own colours
-        return gaussians, {"psnr_before": _psnr(before), "psnr_after": _psnr(before), "steps": 0}
-    fitted = replace(gaussians, sh0=sh0.detach())
-    return fitted, {"psnr_before": _psnr(before), "psnr_after": _psnr(after), "steps": steps}
-
-
-def _psnr(mse: float) -> float:
-    return round(-10.0 * math.log10(max(mse, 1e-12)), 2)

@@ -33,12 +33,7 @@ from ..capture import Observation
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
 from ..models.model_input import predictor_frames
-from ..models.reconstruct import (
-    fit_colours,
-    initial_velocity,
-    observed_asset,
-    predicted_gaussians,
-)
+from ..models.reconstruct import initial_velocity, observed_asset, predicted_gaussians
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
 from .search import OBSERVABLES, observables
@@ -288,12 +283,6 @@ def predict_observation(
     else:
         placed, gs_path = predicted_gaussians(observation, gs_model)
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
-        if refine:  # part of the fit to the recording: the feed-forward path stays < 1 s
-            colours_started = time.perf_counter()
-            placed, details["colours"] = fit_colours(placed, observation)
-            details["geometry"] += ", colours fitted to it"
-            timings["colours"] = time.perf_counter() - colours_started
-            started += timings["colours"]  # not counted twice in "gaussians"
         object_id = f"predicted-{Path(observation.source).stem}"
     if build_new:
         velocity = initial_velocity(placed, observation)
