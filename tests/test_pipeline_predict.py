@@ -150,6 +150,7 @@ def test_ground_from_the_landed_object(bundle, tmp_path):
             bundle / "gaussians.ply",
             "--preview-frames",
             "0",
+            "--no-refine",  # the ground is read before the search: no need to run it
             "--ground",
             "landed",
         ],
@@ -496,6 +497,7 @@ def test_predicted_geometry_from_the_first_frame(bundle, dataset, sample_id, tmp
             tmp_path / "gs",
             "--preview-frames",
             "0",
+            "--no-refine",  # geometry only (the default path's search: the mp4 test above)
         ],
         tmp_path,
     )
@@ -515,6 +517,7 @@ def test_predicted_geometry_from_the_first_frame(bundle, dataset, sample_id, tmp
             tmp_path / "gs",
             "--preview-frames",
             "0",
+            "--no-refine",
         ],
         tmp_path,
         "stored",
