@@ -1,7 +1,7 @@
 """The object's window in a recording: crop the frames (and their camera) to the box around the
 object's masks and area-average them down to a working size. Used wherever renders are compared
-with a recording (the physics search, gradient refinement, the colour fit of predicted
-Gaussians): background pixels cost rendering and tell nothing."""
+with a recording (the physics search, gradient refinement): background pixels cost rendering and
+tell nothing."""
 
 from __future__ import annotations
 

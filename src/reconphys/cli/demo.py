@@ -60,12 +60,11 @@ def demo(
     """Run the main job on a shipped recording: video → simulation-ready asset, with a preview,
     a contact sheet and summary.md (the answer beside the truth). ``--example procedural`` builds
     a procedural object and drops it instead."""
-    from ..pipeline.demo import DEFAULT_EXAMPLE, EXAMPLES_DIR, example_names, load_example
+    from ..pipeline.demo import DEFAULT_EXAMPLE, example_names, load_example
 
     if list_examples:
         for name in example_names():
-            truth = json.loads((EXAMPLES_DIR / name / "truth.json").read_text())
-            typer.echo(f"{name:<12} {truth.get('description', '')}")
+            typer.echo(f"{name:<12} {load_example(name).truth.get('description', '')}")
         typer.echo(f"{PROCEDURAL:<12} a procedural shape built and dropped (no video)")
         return
     _check_out(out, overwrite)
@@ -126,9 +125,8 @@ def _procedural(out, shape, frames, resolution, num_gaussians, num_anchors, seed
             f"{asset.num_anchors} anchors, {asset.springs.shape[0]} springs) in "
             f"{time.perf_counter() - started:.1f} s"
         )
-        asset = read_asset(
-            staging / "asset"
-        )  # simulate what was written: the format is the contract
+        # simulate what was written: the file format is the contract
+        asset = read_asset(staging / "asset")
         summary = simulate_to_folder(
             asset, staging, frames, True, device, resolution, 0, "auto", False
         )

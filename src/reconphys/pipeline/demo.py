@@ -12,10 +12,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 from ..errors import InputError
 from ..io import read_json
+from ..physics import ATTRIBUTES
 from ..physics.model import ATTRIBUTE_RANGES
+from .search import OBSERVABLES, observables
 
 EXAMPLES_DIR = Path(__file__).resolve().parent.parent / "examples"
 EXAMPLE_FORMAT, EXAMPLE_VERSION = "reconphys.example", 1
@@ -69,14 +72,10 @@ def load_example(name: str, root: Path = EXAMPLES_DIR) -> Example:
 
 
 def true_observables(attributes: dict) -> dict[str, float]:
-    """What a video determines (docs/design.md#physical-model): log k/m, log d/m (natural logs of
-    the SI ratios) and friction, from the four attributes."""
-    mass = float(attributes["mass"])
-    return {
-        "log_k_over_m": math.log(float(attributes["stiffness"]) / mass),
-        "log_d_over_m": math.log(float(attributes["damping"]) / mass),
-        "friction": float(attributes["friction"]),
-    }
+    """What a video determines (docs/design.md#physical-model), from the four attributes:
+    :func:`.search.observables` by name (natural logs of the SI ratios; friction)."""
+    physics = SimpleNamespace(**{name: float(attributes[name]) for name in ATTRIBUTES})
+    return dict(zip(OBSERVABLES, observables(physics).tolist(), strict=True))
 
 
 def prior_centre() -> dict[str, float]:
