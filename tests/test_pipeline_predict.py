@@ -504,7 +504,9 @@ def test_predicted_geometry_from_the_first_frame(bundle, dataset, sample_id, tmp
     assert result.exit_code == 0, result.output
     summary = json.loads((out / "prediction.json").read_text())
     assert summary["geometry"].startswith("predicted by the 3DGS predictor")
-    mask_pixels = int((load_observation(bundle / "video.mp4").masks[0] > 0.5).sum())
+    mask_pixels = int(
+        (load_observation(bundle / "video.mp4", camera="dataset").masks[0] > 0.5).sum()
+    )
     assert 0 < summary["gaussians"] <= mask_pixels  # one per object pixel at most
     stored, _ = _predict(
         [

@@ -6,11 +6,14 @@ In order of preference:
    frames), object = pixels > 127 (any channel count; an alpha channel wins when present);
 2. the video's own alpha channel (RGBA PNG frames, transparent GIF): object = alpha > 127;
 3. background subtraction for a **static camera** (:func:`subtract_background`): a clean plate
-   (``--background IMAGE``) when given, else the backdrop colour estimated from the image border.
-   Limits: the object must differ in colour from the backdrop by more than ``tolerance``; the
-   camera must not move; shadows and reflections darker/brighter than the tolerance count as
-   object; without a clean plate the border of every frame must show only backdrop (a uniform
-   sweep, a table top filmed from above, or our black synthetic renders).
+   (``--background IMAGE``) when given, else, when the image border is one colour
+   (:func:`border_is_uniform`: a sweep, a table top filmed from above, our black renders), that
+   colour. Limits: the object must differ in colour from the backdrop by more than
+   ``tolerance``; the camera must not move; shadows and reflections darker/brighter than the
+   tolerance count as object;
+4. otherwise (a floor, a wall, shadows in view, no clean plate) the mask segmenter
+   (models/mask_segmenter.py), which reads the background from the clip itself; the caller
+   passes it in (``load_observation(segment=...)``), as it lives above this layer.
 
 Masks are float [T, H, W] in {0, 1}.
 """
@@ -67,6 +70,24 @@ def backdrop_colour(frames: Tensor, border: int = BORDER) -> Tensor:
         ]
     )
     return edges.median(0).values
+
+
+UNIFORM_BORDER = 0.9  # share of border pixels within tolerance of their median: one colour
+
+
+def border_is_uniform(frames: Tensor, tolerance: float = DEFAULT_TOLERANCE) -> bool:
+    """Whether the border of frames [T, H, W, 3] shows one backdrop colour (see module doc)."""
+    b = BORDER
+    edges = torch.cat(
+        [
+            frames[:, :b].reshape(-1, 3),
+            frames[:, -b:].reshape(-1, 3),
+            frames[:, :, :b].reshape(-1, 3),
+            frames[:, :, -b:].reshape(-1, 3),
+        ]
+    )
+    near = (edges - edges.median(0).values).norm(dim=-1) <= tolerance
+    return float(near.float().mean()) >= UNIFORM_BORDER
 
 
 def subtract_background(

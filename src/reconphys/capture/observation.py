@@ -15,6 +15,7 @@ to black, as in the synthetic renders the models were trained on) and kept at th
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,9 +24,11 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
+from .calibrate import estimate_camera
 from .camera import CameraSpec, default_camera, read_camera
 from .masks import (
     alpha_masks,
+    border_is_uniform,
     check_masks,
     read_background,
     read_mask_folder,
@@ -38,6 +41,8 @@ from .video import (
     resample_indices,
     resample_times,
 )
+
+DATASET_CAMERA = "dataset"  # --camera dataset: the dataset's view 0 (docs/design.md#conventions)
 
 
 @dataclass
@@ -52,6 +57,7 @@ class Observation:
     mask_source: str  # where the masks came from
     recorded_fps: float | None = None  # the file's frame rate (None: not stored / not a video)
     recorded_frames: int = 0  # frames before resampling
+    camera_estimate: dict | None = None  # how the camera was read from the video (no file)
 
     @property
     def num_frames(self) -> int:
@@ -68,17 +74,26 @@ def stored_observation(
     world_to_cam: Tensor,  # [4, 4]
     frame_dt: float,
     source: str,
+    masks: Tensor | None = None,  # [T, H, W] in {0, 1}; None: the black backdrop subtracted
+    mask_source: str | None = None,
 ) -> Observation:
-    """An observation of frames already in memory (a dataset view: black backdrop, ground z = 0)."""
+    """An observation of frames already in memory (a dataset view, ground z = 0): on a black
+    backdrop, or with ``masks`` from elsewhere (a realistic scene), checked as any recording's."""
     height, width = frames.shape[1:3]
     camera = CameraSpec(K.double(), world_to_cam.double(), width, height, 0.0, source)
+    if masks is None:  # the frames are already object-on-black
+        masks = subtract_background(frames)
+        mask_source = "background subtraction (black backdrop)"
+    else:
+        check_masks(masks, source)
+        frames = frames * masks[..., None]
     return Observation(
         frames=frames,
-        masks=subtract_background(frames),
+        masks=masks,
         camera=camera,
         frame_dt=frame_dt,
         source=source,
-        mask_source="background subtraction (black backdrop)",
+        mask_source=mask_source,
         recorded_frames=frames.shape[0],
     )
 
@@ -88,9 +103,11 @@ def load_observation(
     *,
     masks: str | os.PathLike | None = None,  # folder of mask images
     background: str | os.PathLike | None = None,  # clean plate image
-    camera: str | os.PathLike | None = None,  # camera JSON (see .camera)
+    camera: str | os.PathLike | None = None,  # camera JSON (.camera), "dataset", None: estimate
+    fov_deg: float | None = None,  # vertical field of view for the estimate (None: default)
     fps: float | None = None,  # frame rate of a frame folder / override of the file's
     frame_dt: float = 0.03,
+    segment: Callable[[Tensor], Tensor] | None = None,  # frames [T, H, W, 3] → masks [T, H, W]
 ) -> Observation:
     """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input."""
     path = Path(input)
@@ -125,7 +142,10 @@ def load_observation(
     recorded = raw.shape[0]
     raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3].astype(np.float32) / 255.0)
-    if all_masks is None:
+    if all_masks is None and background is None and segment and not border_is_uniform(rgb):
+        chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
+        mask_source = "mask segmenter (no clean plate; the backdrop is not one colour)"
+    elif all_masks is None:
         plate = read_background(background, height, width) if background is not None else None
         chosen = subtract_background(rgb, plate)
         reference = f"clean plate {background}" if plate is not None else "border colour"
@@ -133,10 +153,14 @@ def load_observation(
     else:
         chosen = all_masks[torch.from_numpy(picks)]
     check_masks(chosen, str(masks) if masks is not None else str(path))
-    if camera is not None:
-        spec = read_camera(camera, width, height)
-    else:
+    estimate = None
+    if camera is None:  # from the video: gravity's scale, the ground where the object rests
+        found = estimate_camera(chosen, frame_dt, fov_deg)
+        spec, estimate = found.camera, found.to_json()
+    elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
         spec = default_camera(width, height)
+    else:
+        spec = read_camera(camera, width, height)
     return Observation(
         frames=rgb * chosen[..., None],
         masks=chosen,
@@ -146,4 +170,5 @@ def load_observation(
         mask_source=mask_source,
         recorded_fps=recorded_fps,
         recorded_frames=recorded,
+        camera_estimate=estimate,
     )

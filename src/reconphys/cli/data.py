@@ -37,6 +37,7 @@ SETTINGS_OPTIONS = {
     "max_horizontal_speed": "max_horizontal_speed",
     "max_angular_speed": "max_angular_speed",
     "toss_fraction": "toss_fraction",
+    "scene": "scene",
     "objaverse_uids": "objaverse_uids",
 }
 
@@ -69,6 +70,12 @@ def make_data(
         None,
         help="Share of tosses (0.5–1.5 m/s sideways, so friction shows); the rest are drops "
         "(default 0.5; the paper preset: 0, released from rest).",
+    ),
+    scene: str = typer.Option(
+        None,
+        help="plain (the object on black, fixed cameras: the default) or realistic (a textured "
+        "ground, backdrop, light and contact shadow, a camera per sample, objects 0.1–0.6 m, "
+        "sensor noise, H.264 compression; true masks stored as masks.npz).",
     ),
     seed: int = typer.Option(0, help="Dataset seed: object selection, splits, all samples."),
     workers: int = typer.Option(

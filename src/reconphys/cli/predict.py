@@ -45,7 +45,15 @@ def predict_command(
     ),
     masks: Path = typer.Option(None, help="Folder of object masks, one image per frame."),
     background: Path = typer.Option(None, help="Clean plate image for background subtraction."),
-    camera: Path = typer.Option(None, help="Camera JSON (K, world_to_cam, ground_height)."),
+    camera: Path = typer.Option(
+        None,
+        help="Camera JSON (K, world_to_cam, ground_height), or 'dataset' (the dataset's view 0); "
+        "default: estimated from the video (scale from the free fall, ground where the object "
+        "rests; needs ≥ 4 frames of fall).",
+    ),
+    fov: float = typer.Option(
+        None, help="Vertical field of view, degrees, for the estimated camera (default 45)."
+    ),
     fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
     sample: str = typer.Option(None, help="Dataset input: the sample id."),
     view: int = typer.Option(None, help="Dataset input: the view (default: the model's)."),
@@ -90,6 +98,10 @@ def predict_command(
         raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
     if anchors is not None and anchors < 4:
         raise InputError(f"must be ≥ 4, got {anchors}", field="--anchors")
+    if fov is not None and not (math.isfinite(fov) and 1 <= fov <= 170):
+        raise InputError(
+            f"must be a vertical field of view in [1, 170] degrees, got {fov}", "--fov"
+        )
     if preview_frames < 0:
         raise InputError(f"must be ≥ 0, got {preview_frames}", field="--preview-frames")
     torch_device = resolve_device(device)
@@ -100,6 +112,7 @@ def predict_command(
         masks=masks,
         background=background,
         camera=camera,
+        fov=fov,
         fps=fps,
         sample=sample,
         view=view,

@@ -1,5 +1,6 @@
-"""Training commands: ``train`` (the physics predictor) and ``train-gs`` (the 3DGS predictor);
-both read a config file into their settings dataclass (docs/training.md, docs/usage.md)."""
+"""Training commands: ``train`` (the physics predictor), ``train-gs`` (the 3DGS predictor), both
+reading a config file into their settings dataclass (docs/training.md, docs/usage.md), and
+``train-masks`` (the mask segmenter, docs/usage.md#masks-without-a-clean-plate)."""
 
 from __future__ import annotations
 
@@ -121,3 +122,45 @@ def train_gs(
     set_cpu_threads(threads)
     train_gaussian_predictor(settings, progress=not no_progress, log=typer.echo)
     typer.echo(f"wrote {Path(settings.out) / 'model.safetensors'}")
+
+
+@app.command("train-masks")
+@user_errors
+def train_masks(
+    data: list[Path] = typer.Option(
+        ..., "--data", help="Realistic-look dataset folder (make-data --scene realistic); repeat."
+    ),
+    out: Path = typer.Option(..., "--out", help="Output folder (resumes when run again)."),
+    steps: int = typer.Option(4000, help="Optimiser steps."),
+    batch_size: int = typer.Option(16, help="Frames per step."),
+    crop: int = typer.Option(96, help="Training window, pixels per side."),
+    lr: float = typer.Option(2e-3, help="Peak learning rate (cosine to 5 %)."),
+    seed: int = typer.Option(0, help="Seed of the initialisation and the batches."),
+    threads: int = typer.Option(2, help="CPU threads (torch)."),
+    no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
+):
+    """Train the mask segmenter (the object's masks from a recording without a clean plate) on
+    the true masks of realistic-look datasets; writes OUT/model.safetensors + model.json."""
+    from ..threads import set_cpu_threads
+    from ..train.masks import MaskTrainSettings, train_mask_segmenter
+
+    for name, value in (("--steps", steps), ("--batch-size", batch_size), ("--crop", crop)):
+        if value < 1:
+            raise InputError(f"must be ≥ 1, got {value}", field=name)
+    if not (math.isfinite(lr) and lr > 0):
+        raise InputError(f"must be a positive number, got {lr}", field="--lr")
+    for folder in data:
+        if not folder.is_dir():
+            raise InputError("dataset folder not found", source=str(folder))
+    settings = MaskTrainSettings(
+        data=tuple(str(d) for d in data),
+        out=str(out),
+        steps=steps,
+        batch_size=batch_size,
+        crop=crop,
+        lr=lr,
+        seed=seed,
+    )
+    set_cpu_threads(threads)
+    path = train_mask_segmenter(settings, progress=not no_progress, log=typer.echo)
+    typer.echo(f"wrote {path}")

@@ -34,7 +34,7 @@ from ..errors import InputError
 from ..io import read_npz
 from ..physics import ATTRIBUTES
 from .generate import generate_sample
-from .objects import CanonicalObject, Placement, build_object, sample_asset
+from .objects import CanonicalObject, Placement, build_object, sample_asset, scale_object
 from .plan import plan_objects, plan_samples
 from .sampling import SampleSpec
 from .settings import DataSettings
@@ -226,7 +226,18 @@ class DropDataset(Dataset, _Selection):
             target_contact_time=state["target_contact_frame"] * meta["frame_dt"],
         )
         placement = Placement(spec.rotation, np.array(state["translation"]), state["drop_height"])
-        return sample_asset(self.object(index), spec, placement, self.settings)
+        obj = scale_object(self.object(index), float(state.get("scale", 1.0)))
+        return sample_asset(obj, spec, placement, self.settings)
+
+    def masks(self, index: int) -> torch.Tensor:  # [V, T, H, W] bool at the stored resolution
+        """The true masks of a realistic sample's selected views and frames."""
+        entry = self.samples[index]
+        if "masks" not in entry:
+            raise InputError("stores no masks (made with --scene plain)", str(self.root))
+        names = tuple(f"view_{v}" for v in self.views)
+        stored = read_npz(self.root / entry["masks"], names)
+        masks = np.stack([stored[n] for n in names])[:, self.frame_index]
+        return torch.from_numpy(masks.astype(bool))
 
 
 class GeneratedDropDataset(Dataset, _Selection):
@@ -271,6 +282,14 @@ class GeneratedDropDataset(Dataset, _Selection):
             while len(self._objects) > self.cache_objects:
                 self._objects.popitem(last=False)
         return self._objects[planned.key]
+
+    def masks(self, index: int) -> torch.Tensor:  # [V, T, H, W] bool
+        """The true masks of a realistic sample's selected views and frames (generated again)."""
+        if self.settings.scene != "realistic":
+            raise InputError("stores no masks (settings with scene plain)", "settings")
+        planned = self.samples[index]
+        sample = generate_sample(self.object(index), planned.index, self.settings, self.device)
+        return torch.from_numpy(sample.masks[self.views][:, self.frame_index])
 
     def __getitem__(self, index: int) -> dict:
         planned = self.samples[index]

@@ -1,4 +1,5 @@
-"""One sample in memory: draw its randomness, simulate 30 frames, render the 4 dataset views.
+"""One sample in memory: draw its randomness, simulate 30 frames, render the 4 dataset views
+(the plain look, or the realistic one of data/scene.py).
 
 Shared by ``make-data`` (which writes the result) and the on-the-fly dataset (which returns it), so
 both give the same sample for the same settings and seed.
@@ -13,9 +14,17 @@ import torch
 
 from ..assets.asset import Asset
 from ..render import Cameras, dataset_views, render
-from ..render.video import to_uint8
-from .objects import CanonicalObject, Placement, place, sample_asset
+from ..render.scene import (
+    SceneLook,
+    add_sensor_noise,
+    composite_in_scene,
+    scene_background,
+    shade_gaussians,
+)
+from ..render.video import compress_video, to_uint8
+from .objects import CanonicalObject, Placement, place, sample_asset, scale_object
 from .sampling import SampleSpec, contact_frame, draw_sample
+from .scene import SceneSpec, draw_scene, framed_cameras
 from .settings import DataSettings
 
 AZIMUTHS_DEG = (0.0, 90.0, 180.0, 270.0)
@@ -30,9 +39,13 @@ class GeneratedSample:
     anchors: np.ndarray  # [T, N_A, 3] float32, frame 0 = initial state, metres
     velocities: np.ndarray  # [T, N_A, 3] float32, m/s
     substeps: int  # substeps per frame used
-    frames: np.ndarray  # [V, T, H, W, 3] uint8, black background
+    frames: np.ndarray  # [V, T, H, W, 3] uint8: black background, or the realistic scene
     cameras: Cameras  # V = 4 cameras, no batch dims
     contact_frame: int  # first frame touching the ground (−1: never)
+    # the realistic look only (None in the plain one):
+    scene: SceneSpec | None = None
+    masks: np.ndarray | None = None  # [V, T, H, W] bool, the object's true masks (alpha > 0.5)
+    videos: list[bytes] | None = None  # the V encoded mp4 files whose decoded frames are `frames`
 
 
 def dataset_cameras(settings: DataSettings, device=None) -> Cameras:
@@ -55,17 +68,61 @@ def render_views(
     cameras: Cameras,  # C cameras, no batch dims
 ) -> torch.Tensor:  # [C, T, H, W, 3] in [0, 1]
     """Render every frame from every camera (renderer "auto": gsplat on CUDA, else torch)."""
+    return render_object_views(asset, anchors, cameras)[0]
+
+
+def render_object_views(
+    asset: Asset,
+    anchors: torch.Tensor,  # [T, N_A, 3] metres
+    cameras: Cameras,  # C cameras, no batch dims
+    look: SceneLook | None = None,  # shade the colours by its light (the realistic look)
+) -> tuple[torch.Tensor, torch.Tensor]:  # rgb [C, T, H, W, 3] on black, alpha [C, T, H, W]
+    """:func:`render_views` with the alpha, the colours shaded by ``look``'s light if given."""
     device = anchors.device
     gaussians = asset.gaussians.to(device)
     cameras = cameras.to(device)
-    chunks = []
+    rgb, alpha = [], []
     with torch.no_grad():
         for start in range(0, anchors.shape[0], FRAMES_PER_RENDER_CALL):
             part = anchors[start : start + FRAMES_PER_RENDER_CALL]
             means = asset.gaussian_means(part)  # [t, N, 3]
             batch = gaussians.map(lambda t, n=part.shape[0]: t.expand(n, *t.shape))
-            chunks.append(render(batch.with_means(means), cameras).rgb)  # [t, C, H, W, 3]
-    return torch.cat(chunks).transpose(0, 1)
+            batch = batch.with_means(means)
+            if look is not None:
+                batch = shade_gaussians(batch, look)
+            out = render(batch, cameras)
+            rgb.append(out.rgb)  # [t, C, H, W, 3]
+            alpha.append(out.alpha)
+    return torch.cat(rgb).transpose(0, 1), torch.cat(alpha).transpose(0, 1)
+
+
+def render_realistic(
+    asset: Asset,
+    anchors: torch.Tensor,  # [T, N_A, 3] metres
+    spec: SceneSpec,
+    settings: DataSettings,
+) -> tuple[Cameras, np.ndarray, np.ndarray, list[bytes]]:
+    """The realistic look: cameras framed on the motion, the shaded object over the scene with
+    its shadow, sensor noise and H.264 compression. Returns the cameras, the decoded frames
+    [V, T, H, W, 3] uint8, the true masks [V, T, H, W] bool and the V mp4 files."""
+    anchors_np = anchors.detach().cpu().double().numpy()
+    cameras = framed_cameras(anchors_np, spec, settings.resolution)
+    rgb, alpha = render_object_views(asset, anchors, cameras, spec.look)
+    background = scene_background(cameras, spec.look)
+    extent = anchors_np[0].max(0) - anchors_np[0].min(0)
+    spacing = float(np.prod(np.maximum(extent, 1e-3)) / anchors_np.shape[1]) ** (1 / 3)
+    frames = composite_in_scene(
+        rgb.cpu().double(), alpha.cpu().double(), anchors.cpu(), background, spec.look, spacing
+    )
+    frames = add_sensor_noise(frames, spec.look.noise_sigma, spec.noise_seed)
+    fps = 1.0 / settings.frame_dt
+    decoded, videos = [], []
+    for view in to_uint8(frames):
+        frames_v, data = compress_video(view, fps, spec.video_quality)
+        decoded.append(frames_v)
+        videos.append(data)
+    masks = (alpha > 0.5).cpu().numpy()
+    return cameras, np.stack(decoded), masks, videos
 
 
 def generate_sample(
@@ -75,12 +132,19 @@ def generate_sample(
     device: torch.device | str = "cpu",
 ) -> GeneratedSample:
     spec = draw_sample(settings, obj.id, sample_index)
+    if settings.scene == "realistic":  # the object at the sample's size
+        obj = scale_object(obj, draw_scene(settings, obj.id, sample_index).size / settings.size)
     placement = place(obj, spec)
     asset = sample_asset(obj, spec, placement, settings)
     trajectory = asset.simulate(settings.num_frames - 1, torch.device(device))
     anchors = trajectory.x[0]  # [T, N_A, 3]
-    cameras = dataset_cameras(settings)
-    frames = to_uint8(render_views(asset, anchors, cameras))
+    scene = masks = videos = None
+    if settings.scene == "realistic":
+        scene = draw_scene(settings, obj.id, sample_index)
+        cameras, frames, masks, videos = render_realistic(asset, anchors, scene, settings)
+    else:
+        cameras = dataset_cameras(settings)
+        frames = to_uint8(render_views(asset, anchors, cameras))
     anchors_np = anchors.cpu().float().numpy()
     return GeneratedSample(
         spec=spec,
@@ -92,4 +156,7 @@ def generate_sample(
         frames=frames,
         cameras=cameras,
         contact_frame=contact_frame(anchors_np, asset.physics.ground_height),
+        scene=scene,
+        masks=masks,
+        videos=videos,
     )

@@ -9,7 +9,8 @@ they are, and every sample of an object has the same anchors.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -56,6 +57,21 @@ def build_object(
         rest_length=asset.rest_length,
         binding_index=asset.binding_index,
         binding_weight=asset.binding_weight,
+    )
+
+
+def scale_object(obj: CanonicalObject, factor: float) -> CanonicalObject:
+    """The same object ``factor`` times larger (Gaussians, anchors, rest lengths; springs and
+    binding are unchanged: the binding's weights depend only on distance ratios)."""
+    if factor == 1.0:
+        return obj
+    g = obj.gaussians
+    gaussians = replace(g, means=g.means * factor, log_scales=g.log_scales + math.log(factor))
+    return replace(
+        obj,
+        gaussians=gaussians,
+        anchors=obj.anchors * factor,
+        rest_length=obj.rest_length * factor,
     )
 
 

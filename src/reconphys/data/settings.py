@@ -19,6 +19,16 @@ from ..errors import InputError
 from ..physics import ATTRIBUTE_RANGES
 
 DISTRIBUTIONS = ("uniform", "log-uniform")
+SCENES = ("plain", "realistic")
+SCENE_FIELDS = (
+    "scene",
+    "object_size_range",
+    "fov_range_deg",
+    "elevation_range_deg",
+    "framing_range",
+    "noise_range",
+    "video_quality_range",
+)
 
 
 @dataclass(frozen=True)
@@ -60,6 +70,16 @@ class DataSettings:
     camera_elevation_deg: float = 15.0
     camera_target: tuple[float, float, float] = (0.0, 0.0, 0.3)  # metres
     objaverse_uids: str = ""  # optional file of Objaverse UIDs (one a line) to draw from
+    # The look (docs/design.md#synthetic-dataset): "plain" (object on black, the cameras above) or
+    # "realistic" (data/scene.py: ground, backdrop, light and shadow, a camera per sample framed
+    # on the motion, sized objects, noise, compression; the fields below apply to it only).
+    scene: str = "plain"
+    object_size_range: tuple[float, float] = (0.1, 0.6)  # largest side, metres (replaces size)
+    fov_range_deg: tuple[float, float] = (30.0, 65.0)  # vertical field of view
+    elevation_range_deg: tuple[float, float] = (3.0, 35.0)  # camera above the motion's centre
+    framing_range: tuple[float, float] = (0.45, 0.85)  # share of the image the motion spans
+    noise_range: tuple[float, float] = (0.0, 0.02)  # sensor noise σ, colour units in [0, 1]
+    video_quality_range: tuple[float, float] = (4.0, 8.0)  # H.264 quality 0–10 (CRF 31 to 10)
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -75,8 +95,14 @@ class DataSettings:
         return DataSettings(**values).validated()
 
     def fingerprint(self) -> str:
-        """Short hash of the settings: tags every object and sample written with them."""
-        text = json.dumps(self.to_dict(), sort_keys=True)
+        """Short hash of the settings: tags every object and sample written with them. The
+        realistic look's fields count only when it is chosen (plain datasets made before they
+        existed keep their fingerprint)."""
+        values = self.to_dict()
+        if self.scene == "plain":
+            for name in SCENE_FIELDS:
+                values.pop(name)
+        text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def samples_for(self, split: str) -> int:
@@ -133,6 +159,23 @@ class DataSettings:
                     f"[{low}, {high}] must lie inside the range of docs/design.md#attribute-ranges "
                     f"[{allowed[0]}, {allowed[1]}]",
                     field=f"{name}_range",
+                )
+        if self.scene not in SCENES:
+            raise InputError(
+                f"expected one of {', '.join(SCENES)}, got {self.scene!r}", field="--scene"
+            )
+        for name, (lowest, highest) in {
+            "object_size_range": (1e-3, 10.0),
+            "fov_range_deg": (1.0, 120.0),
+            "elevation_range_deg": (0.0, 80.0),
+            "framing_range": (0.05, 1.0),
+            "noise_range": (0.0, 0.5),
+            "video_quality_range": (0.0, 10.0),
+        }.items():
+            low, high = getattr(self, name)
+            if not (lowest <= low <= high <= highest):
+                raise InputError(
+                    f"[{low}, {high}] must satisfy {lowest} ≤ low ≤ high ≤ {highest}", field=name
                 )
         first, last = self.contact_frame_range
         if not (0 < first <= last < self.num_frames - 1):

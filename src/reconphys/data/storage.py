@@ -223,8 +223,17 @@ def write_sample(
                 "frame_dt": np.float64(settings.frame_dt),
             },
         )
+        if sample.masks is not None:  # the realistic look: true masks and the encoded videos
+            write_npz(
+                folder / "masks.npz",
+                {f"view_{v}": sample.masks[v] for v in range(len(sample.masks))},
+                compress=True,
+            )
         for v in range(len(sample.frames)):
-            write_mp4(folder / video_name(v), sample.frames[v], fps=1.0 / settings.frame_dt)
+            if sample.videos is not None:
+                (folder / video_name(v)).write_bytes(sample.videos[v])  # the folder is staged
+            else:
+                write_mp4(folder / video_name(v), sample.frames[v], fps=1.0 / settings.frame_dt)
         spec, placement, cameras = sample.spec, sample.placement, sample.cameras
         meta = {
             "format": SAMPLE_FORMAT,
@@ -245,6 +254,7 @@ def write_sample(
                 "angular_velocity": list(spec.angular_velocity),
                 "drop_height": placement.drop_height,
                 "target_contact_frame": spec.target_contact_time / settings.frame_dt,
+                "scale": 1.0 if sample.scene is None else sample.scene.size / settings.size,
             },
             "contact_frame": sample.contact_frame,
             "substeps": sample.substeps,
@@ -258,6 +268,8 @@ def write_sample(
             },
             "files": _file_sizes(folder),
         }
+        if sample.scene is not None:
+            meta["scene"] = sample.scene.to_dict()
         write_json(folder / "sample.json", meta)
     return manifest_entry(meta)
 
@@ -287,6 +299,7 @@ def manifest_entry(meta: dict) -> dict:
         "frames": f"{folder}/frames.npz",
         "trajectory": f"{folder}/trajectory.npz",
         "videos": [f"{folder}/{video_name(v)}" for v in range(views)],
+        **({"masks": f"{folder}/masks.npz"} if "scene" in meta else {}),
     }
 
 
@@ -346,7 +359,8 @@ def read_manifest(root: Path, name: str = MANIFEST) -> dict:
     return manifest
 
 
-SAMPLE_PATHS = ("dir", "object_dir", "frames", "trajectory", "videos")  # relative to the folder
+# relative to the folder
+SAMPLE_PATHS = ("dir", "object_dir", "frames", "trajectory", "videos", "masks")
 
 
 def _check_inside(manifest: dict, source: str) -> None:

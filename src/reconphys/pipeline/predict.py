@@ -146,6 +146,7 @@ def predict(
     masks: str | os.PathLike | None = None,
     background: str | os.PathLike | None = None,
     camera: str | os.PathLike | None = None,
+    fov: float | None = None,
     fps: float | None = None,
     sample: str | None = None,
     view: int | None = None,
@@ -195,6 +196,7 @@ def predict(
         background=background,
         camera=camera,
         fps=fps,
+        fov_deg=fov,
         frame_dt=float(predictor.metadata["input"].get("frame_dt", 0.03)),
         sample=sample,
         view=predictor.view if view is None else view,
@@ -217,6 +219,8 @@ def predict(
         "camera": observation.camera.source,
         "ground_height": observation.camera.ground_height,
     }
+    if observation.camera_estimate is not None:
+        details["input"]["camera_estimate"] = observation.camera_estimate
 
     return predict_observation(
         observation,

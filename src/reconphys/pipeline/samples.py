@@ -4,9 +4,12 @@ ground-truth geometry and initial state, an upper bound; and its attributes)."""
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
+
+from torch import Tensor
 
 from ..assets.asset import Asset
 from ..capture import Observation, load_observation
@@ -48,12 +51,19 @@ def load_sample(
     dataset = DropDataset(root, views=[view], allow_incomplete=True, verify=False)
     index = dataset.index_of(sample)
     item = dataset[index]
+    frames = item["frames"][0].float()
+    masks = mask_source = None
+    if dataset.settings.scene == "realistic":  # as a recording: no stored mask is used
+        masks = segment_frames(frames)
+        mask_source = "mask segmenter (realistic scene)"
     observation = stored_observation(
-        item["frames"][0].float(),
+        frames,
         item["K"][0],
         item["world_to_cam"][0],
         dataset.settings.frame_dt,
         f"{root} sample {sample} view {view} (stored frames)",
+        masks=masks,
+        mask_source=mask_source,
     )
     truth = SampleTruth(
         root=str(root),
@@ -73,6 +83,7 @@ def load_input(
     camera: str | os.PathLike | None = None,
     fps: float | None = None,
     frame_dt: float = 0.03,
+    fov_deg: float | None = None,  # vertical field of view when the camera is estimated
     sample: str | None = None,  # dataset input: the sample id
     view: int = 0,  # dataset input: the view
 ) -> tuple[Observation, SampleTruth | None]:
@@ -86,6 +97,27 @@ def load_input(
     if sample is not None:
         raise InputError("--sample is for dataset folders (with manifest.json)", source=str(path))
     observation = load_observation(
-        path, masks=masks, background=background, camera=camera, fps=fps, frame_dt=frame_dt
+        path,
+        masks=masks,
+        background=background,
+        camera=camera,
+        fps=fps,
+        frame_dt=frame_dt,
+        fov_deg=fov_deg,
+        segment=segment_frames,
     )
     return observation, None
+
+
+@functools.cache
+def _segmenter():
+    from ..models.mask_segmenter import load_mask_segmenter
+
+    return load_mask_segmenter()
+
+
+def segment_frames(frames: Tensor) -> Tensor:  # [T, H, W, 3] in [0, 1] → [T, H, W] in {0, 1}
+    """The object's masks by the shipped mask segmenter (models/mask_segmenter.py)."""
+    from ..models.mask_segmenter import segment_clip
+
+    return segment_clip(_segmenter(), frames)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -25,8 +26,10 @@ def write_mp4(
     path: str | os.PathLike,
     frames: np.ndarray,  # [T, H, W, 3] uint8
     fps: float,
+    quality: float = 8.0,
 ) -> Path:
-    """Write an H.264 mp4 (yuv420p, so every player opens it); odd sizes are padded by one pixel."""
+    """Write an H.264 mp4 (yuv420p, so every player opens it); odd sizes are padded by one pixel.
+    ``quality`` is imageio-ffmpeg's 0–10 (10: best; libx264's CRF = 51·(1 − quality/10))."""
     path = Path(path)
     frames = np.asarray(frames)
     pad_h, pad_w = frames.shape[1] % 2, frames.shape[2] % 2
@@ -38,7 +41,7 @@ def write_mp4(
             format="FFMPEG",
             fps=fps,
             codec="libx264",
-            quality=8,
+            quality=quality,
             macro_block_size=1,
             pixelformat="yuv420p",
         )
@@ -46,6 +49,24 @@ def write_mp4(
             for frame in frames:
                 writer.append_data(frame)
     return path
+
+
+def compress_video(
+    frames: np.ndarray,  # [T, H, W, 3] uint8
+    fps: float,
+    quality: float,
+) -> tuple[np.ndarray, bytes]:  # decoded [T, H, W, 3] uint8, the mp4 file's bytes
+    """Encode as :func:`write_mp4` does and decode again: what a camera's compressed video gives."""
+    height, width = frames.shape[1:3]
+    with tempfile.TemporaryDirectory() as folder:
+        path = write_mp4(Path(folder) / "video.mp4", frames, fps, quality)
+        data = path.read_bytes()
+        reader = imageio.get_reader(path, format="FFMPEG")
+        with reader:
+            decoded = np.stack([np.asarray(f)[:height, :width, :3] for f in reader])
+    if decoded.shape != frames.shape:
+        raise RuntimeError(f"decoded {decoded.shape} frames for {frames.shape} encoded")
+    return decoded, data
 
 
 def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:

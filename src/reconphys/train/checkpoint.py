@@ -81,3 +81,27 @@ def load_checkpoint(path: Path) -> dict:
     if payload.get("version") != VERSION:
         raise InputError(f"version {payload.get('version')!r} is not supported", str(path))
     return payload
+
+
+def save_step(path: Path, model, optimizer, step: int, settings: dict) -> None:
+    """A small run's checkpoint (``train-gs``, ``train-masks``): model and optimiser states, the
+    step and the run's settings."""
+    payload = {"model": model.state_dict(), "optimizer": optimizer.state_dict()}
+    save_checkpoint(path, {**payload, "step": step, "settings": settings})
+
+
+def resume_step(path: Path, model, optimizer, settings: dict, log=print) -> int:
+    """Load a :func:`save_step` checkpoint at ``path`` into ``model`` and ``optimizer`` when there
+    is one (refusing a run with other settings); returns the first step to run."""
+    if not path.is_file():
+        return 1
+    state = load_checkpoint(path)
+    if state["settings"] != settings:
+        raise InputError(
+            "a run with other settings is in this folder (use another --out)",
+            source=str(path.parent),
+        )
+    model.load_state_dict(state["model"])
+    optimizer.load_state_dict(state["optimizer"])
+    log(f"resuming from step {state['step']}")
+    return state["step"] + 1

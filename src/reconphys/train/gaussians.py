@@ -26,10 +26,10 @@ import torch.nn.functional as F
 from ..capture.masks import subtract_background
 from ..data.dataset import DropDataset
 from ..errors import InputError
-from ..io import atomic_file
 from ..models.gaussian_predictor import GaussianPredictor, GaussianPredictorConfig
 from ..models.gaussian_shipped import save_gaussian_predictor
 from ..render import Cameras, render
+from .checkpoint import resume_step, save_step
 
 CHECKPOINT = "checkpoint.pt"
 
@@ -110,18 +110,8 @@ def train_gaussian_predictor(
     torch.manual_seed(settings.seed)
     model = GaussianPredictor(config)
     optimizer = torch.optim.Adam(model.parameters(), lr=settings.lr)
-    first_step = 1
     checkpoint_path = out / CHECKPOINT
-    if checkpoint_path.is_file():
-        state = torch.load(checkpoint_path, weights_only=True)
-        if state["settings"] != asdict(settings):
-            raise InputError(
-                "a run with other settings is in this folder (use another --out)", source=str(out)
-            )
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        first_step = state["step"] + 1
-        log(f"resuming from step {state['step']}")
+    first_step = resume_step(checkpoint_path, model, optimizer, asdict(settings), log)
     out.mkdir(parents=True, exist_ok=True)
     (out / "settings.json").write_text(json.dumps(asdict(settings), indent=1) + "\n")
     log_path = out / "log.jsonl"
@@ -170,14 +160,7 @@ def train_gaussian_predictor(
         if progress:
             steps.set_postfix(loss=f"{record['loss']:.4f}")
         if step % settings.checkpoint_every == 0 or step == settings.steps:
-            state = {
-                "model": model.state_dict(),
-                "optimizer": optimizer.state_dict(),
-                "step": step,
-                "settings": asdict(settings),
-            }
-            with atomic_file(checkpoint_path) as tmp:
-                torch.save(state, tmp)
+            save_step(checkpoint_path, model, optimizer, step, asdict(settings))
         if stop_after is not None and step >= stop_after:
             return out
     training = {

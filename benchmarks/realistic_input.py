@@ -1,0 +1,153 @@
+"""What the front end reads from a realistic recording, against the truth
+(docs/usage.md#masks-without-a-clean-plate, docs/usage.md#camera-and-ground-from-the-video).
+
+For view 0 of every test sample of a realistic-look dataset (``make-data --scene realistic``),
+taken as a user's recording (frames only):
+
+- masks: the mask segmenter's IoU with the stored true masks (mean over frames), beside the
+  temporal-median background subtraction;
+- camera and ground (capture/calibrate.py), from the segmenter's masks and from the true masks,
+  with the vertical field of view known (a camera file without pose) or assumed (the default):
+  scale error = the object's metric size read from the video / the truth − 1 (from the distance
+  and the focal length: size = pixels · distance / f); ground error = the drop height read from
+  the video − the true one (the height above the estimated ground of the object's true lowest
+  point in frame 0, at its pixel and the depth the estimate gives the object), metres: what
+  decides when the simulated object lands.
+
+    python benchmarks/realistic_input.py data/real_other [--limit 40]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import time
+
+import numpy as np
+import torch
+
+from reconphys.capture.calibrate import DEFAULT_FOV_DEG, estimate_camera
+from reconphys.data import DropDataset
+from reconphys.errors import InputError
+from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
+
+
+def iou(prediction: torch.Tensor, truth: torch.Tensor) -> float:
+    p, t = prediction > 0.5, truth > 0.5
+    return float(((p & t).sum((1, 2)) / (p | t).sum((1, 2)).clamp_min(1)).mean())
+
+
+def camera_errors(masks, item, meta, fov_deg) -> dict:
+    K_true = item["K"][0].double()
+    w2c_true = item["world_to_cam"][0].double()
+    anchors = item["anchors"].double()  # [T, N_A, 3]
+    estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg)
+    centre_cam = w2c_true[:3, :3] @ anchors[0].mean(0) + w2c_true[:3, 3]
+    true_distance = float(centre_cam.norm())
+    f_true, f_est = float(K_true[1, 1]), float(estimate.camera.K[1, 1])
+    scale = (estimate.distance / f_est) / (true_distance / f_true)
+    lowest = anchors[0][anchors[0][:, 2].argmin()]  # frame 0's lowest point: the drop height
+    cam = w2c_true[:3, :3] @ lowest + w2c_true[:3, 3]
+    pixel = (K_true @ cam)[:2] / cam[2]
+    depth = float(cam[2]) * estimate.distance / true_distance
+    K_est = estimate.camera.K.double()
+    ray = torch.stack(
+        [(pixel[0] - K_est[0, 2]) / K_est[0, 0], (pixel[1] - K_est[1, 2]) / K_est[1, 1]]
+    )
+    point_cam = depth * torch.cat([ray, torch.ones(1, dtype=torch.float64)])
+    w2c = estimate.camera.world_to_cam.double()
+    point_world = w2c[:3, :3].T @ (point_cam - w2c[:3, 3])
+    return {
+        "scale_error": scale - 1,
+        "ground_error_m": float(point_world[2]) - float(lowest[2]),
+        "pitch_deg": estimate.pitch_deg,
+        "fall_frames": estimate.fall_frames,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("data")
+    parser.add_argument("--limit", type=int, default=None)
+    parser.add_argument("--split", default="test")
+    parser.add_argument("--out", default=None, help="JSON file of the per-sample rows")
+    args = parser.parse_args()
+    torch.set_num_threads(2)
+    dataset = DropDataset(args.data, split=args.split, views=[0])
+    model = load_mask_segmenter()
+    rows = []
+    started = time.perf_counter()
+    count = len(dataset) if args.limit is None else min(args.limit, len(dataset))
+    for index in range(count):
+        item, meta = dataset[index], dataset.meta(index)
+        frames, truth = item["frames"][0], dataset.masks(index)[0].float()
+        tic = time.perf_counter()
+        masks = segment_clip(model, frames)
+        seconds = time.perf_counter() - tic
+        median = ((frames - frames.median(0).values).norm(dim=-1) > 0.08).float()
+        row = {
+            "id": item["id"],
+            "launch": meta["initial_state"]["launch"],
+            "iou_segmenter": iou(masks, truth),
+            "iou_median": iou(median, truth),
+            "segment_seconds": seconds,
+        }
+        fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(item["K"][0, 1, 1])))
+        for name, used, fov in (
+            ("true_masks_true_fov", truth, fov_true),
+            ("segmenter_true_fov", masks, fov_true),
+            ("segmenter_default_fov", masks, None),
+        ):
+            try:
+                row[name] = camera_errors(used, item, meta, fov)
+            except InputError as e:
+                row[name] = {"refused": str(e)}
+        rows.append(row)
+        print(
+            f"{row['id']}: IoU {row['iou_segmenter']:.3f} (median {row['iou_median']:.3f}) "
+            + " ".join(
+                f"{n}: "
+                + (
+                    f"scale {row[n]['scale_error']:+.3f} ground {row[n]['ground_error_m']:+.3f}"
+                    if "scale_error" in row[n]
+                    else "refused"
+                )
+                for n in ("true_masks_true_fov", "segmenter_default_fov")
+            ),
+            flush=True,
+        )
+    print(
+        f"\n{len(rows)} samples of {args.data} ({args.split}), view 0; "
+        f"{platform.processor() or platform.machine()}, torch {torch.__version__}, "
+        f"{time.perf_counter() - started:.0f} s"
+    )
+    ious = np.array([r["iou_segmenter"] for r in rows])
+    print(
+        f"mask IoU: segmenter mean {ious.mean():.3f} (median {np.median(ious):.3f}, min "
+        f"{ious.min():.3f}), temporal median {np.mean([r['iou_median'] for r in rows]):.3f}; "
+        f"segmenter {np.mean([r['segment_seconds'] for r in rows]):.2f} s a clip"
+    )
+    for name in ("true_masks_true_fov", "segmenter_true_fov", "segmenter_default_fov"):
+        good = [r[name] for r in rows if "scale_error" in r[name]]
+        refused = len(rows) - len(good)
+        if not good:
+            print(f"{name}: all refused")
+            continue
+        scale = np.abs([g["scale_error"] for g in good])
+        ground = np.abs([g["ground_error_m"] for g in good])
+        print(
+            f"{name}: |scale error| mean {scale.mean():.3f} median {np.median(scale):.3f} "
+            f"≤ 10 %: {(scale <= 0.1).mean():.0%}; |ground error| mean {100 * ground.mean():.1f} "
+            f"cm median {100 * np.median(ground):.1f} cm ≤ 2 cm: {(ground <= 0.02).mean():.0%}; "
+            f"refused {refused}"
+        )
+    print(f"(default vertical field of view {DEFAULT_FOV_DEG}°)")
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump(rows, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,115 @@
+"""The ``realistic`` look of a sample (docs/design.md#synthetic-dataset): what is drawn for it and
+the cameras framed on its motion.
+
+A realistic sample draws, from its own random stream (so the physics of a seed is the same in
+both looks), the object's size, a scene (render/scene.py: ground, backdrop, light, noise), a
+camera (vertical field of view, elevation, azimuth, how much of the image the motion spans and
+where it sits) and the video's compression quality. The four views share intrinsics and distance
+and sit 90° apart around the centre of the motion, as in the plain look.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..render import Cameras, intrinsics_from_fov, look_at
+from ..render.scene import SceneLook, draw_look
+from .sampling import sample_seed
+from .settings import DataSettings
+
+MIN_CAMERA_HEIGHT = 0.05  # metres above the ground
+SCENE_STREAM = 1  # the realistic look's random stream, beside the sample's own (0)
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """The random part of a realistic sample's look."""
+
+    size: float  # the object's largest side, metres
+    look: SceneLook
+    fov_deg: float  # vertical
+    elevation_deg: float
+    azimuth_deg: float  # of view 0; the others follow at +90°, +180°, +270°
+    framing: float  # share of the image height the motion's bounding sphere spans
+    offset: tuple[float, float]  # where the motion sits, in units of the free margin, [-1, 1]
+    video_quality: float  # H.264 quality 0–10
+    noise_seed: int
+
+    def to_dict(self) -> dict:
+        return {
+            "size": self.size,
+            "look": self.look.to_dict(),
+            "fov_deg": self.fov_deg,
+            "elevation_deg": self.elevation_deg,
+            "azimuth_deg": self.azimuth_deg,
+            "framing": self.framing,
+            "offset": list(self.offset),
+            "video_quality": self.video_quality,
+        }
+
+
+def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> SceneSpec:
+    """The look of sample ``sample_index`` of ``object_id`` (a stream apart from its physics)."""
+    seed = sample_seed(settings.seed, object_id, sample_index)
+    rng = np.random.default_rng([seed, SCENE_STREAM])
+    return SceneSpec(
+        size=float(rng.uniform(*settings.object_size_range)),
+        look=draw_look(rng, settings.noise_range),
+        fov_deg=float(rng.uniform(*settings.fov_range_deg)),
+        elevation_deg=float(rng.uniform(*settings.elevation_range_deg)),
+        azimuth_deg=float(rng.uniform(0.0, 360.0)),
+        framing=float(rng.uniform(*settings.framing_range)),
+        offset=(float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1))),
+        video_quality=float(rng.uniform(*settings.video_quality_range)),
+        noise_seed=int(rng.integers(0, 2**31 - 1)),
+    )
+
+
+def framed_cameras(
+    points: np.ndarray,  # [T, P, 3] every anchor of every frame, metres
+    spec: SceneSpec,
+    resolution: int,
+) -> Cameras:
+    """Four views whose images hold the whole motion: its bounding sphere spans ``framing`` of the
+    image height, shifted off-centre by ``offset`` of the margin left (never out of view)."""
+    flat = points.reshape(-1, 3).astype(np.float64)
+    centre = 0.5 * (flat.min(0) + flat.max(0))
+    radius = float(np.linalg.norm(flat - centre, axis=1).max())
+    half_fov = math.radians(spec.fov_deg) / 2
+    half_angle = spec.framing * half_fov  # the sphere's angular radius
+    distance = radius / math.sin(half_angle)
+    margin = 0.9 * (half_fov - half_angle)  # angle the sphere may move off the image centre
+    elevation = math.radians(spec.elevation_deg)
+    lowest = math.asin(min(1.0, max(0.0, (MIN_CAMERA_HEIGHT - centre[2]) / distance)))
+    elevation = max(elevation, lowest)
+    eyes, targets = [], []
+    for k in range(4):
+        azimuth = math.radians(spec.azimuth_deg + 90.0 * k)
+        back = np.array(
+            [
+                math.cos(elevation) * math.cos(azimuth),
+                math.cos(elevation) * math.sin(azimuth),
+                math.sin(elevation),
+            ]
+        )  # from the centre towards the camera
+        eye = centre + distance * back
+        right = np.cross(-back, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, -back)
+        # aim beside the centre, so that it appears offset by the given angles
+        shift = math.tan(margin) * distance
+        target = centre - shift * (spec.offset[0] * right + spec.offset[1] * up)
+        eyes.append(eye)
+        targets.append(target)
+    world_to_cam = look_at(torch.tensor(np.array(eyes)), torch.tensor(np.array(targets)))
+    K = intrinsics_from_fov(spec.fov_deg, resolution, resolution, dtype=torch.float64)
+    return Cameras(
+        K=K.expand(4, 3, 3).float().contiguous(),
+        world_to_cam=world_to_cam.float().contiguous(),
+        width=resolution,
+        height=resolution,
+    )

@@ -1,0 +1,165 @@
+"""The object's masks from the recording itself: a small temporal U-Net
+(docs/usage.md#masks-without-a-clean-plate).
+
+For a static camera with no clean plate and a backdrop that is not one colour (a floor, a wall,
+shadows), each frame ``F_t`` is segmented from what the whole clip says about the background:
+``A`` (the mean of the first two frames: the scene with the object where it was let go),
+``Z`` (the median of the last three: the object at rest), ``M`` (the per-pixel median of all
+frames). A pixel's own history is ambiguous — a step from one colour to another is an object
+arriving (``A`` is background) or leaving (``Z`` is) — so the network also sees the image around
+it (the object falls downwards in the image) and the clip time ``t``. Inputs per frame, 16
+channels: ``F_t, F_t − A, F_t − Z, F_t − M, A − Z, t/(T−1)``; output: the object's logit per pixel.
+Trained on the realistic look's stored masks (``reconphys train-masks``, train/masks.py); the
+shipped weights are ``reconphys/weights/mask_segmenter.safetensors`` + ``.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+from torch import Tensor
+
+from ..errors import InputError
+from ..io import atomic_file, read_json
+
+FORMAT = "reconphys.mask_segmenter"
+VERSION = 1
+INPUT_CHANNELS = 16
+SHIPPED_MASKS_PATH = (
+    Path(__file__).resolve().parent.parent / "weights" / "mask_segmenter.safetensors"
+)
+FRAMES_PER_CALL = 8  # bounds memory at large resolutions
+
+
+@dataclass(frozen=True)
+class SegmenterConfig:
+    channels: tuple[int, ...] = (24, 32, 48, 64)  # per level; the deepest is dilated (context)
+    groups: int = 4  # GroupNorm groups
+
+    @staticmethod
+    def from_dict(data: dict) -> SegmenterConfig:
+        return SegmenterConfig(channels=tuple(data["channels"]), groups=int(data["groups"]))
+
+
+def _block(inputs: int, outputs: int, groups: int, dilation: int = 1) -> nn.Sequential:
+    conv = lambda i, o: nn.Conv2d(i, o, 3, padding=dilation, dilation=dilation)  # noqa: E731
+    return nn.Sequential(
+        conv(inputs, outputs),
+        nn.GroupNorm(groups, outputs),
+        nn.ReLU(inplace=True),
+        conv(outputs, outputs),
+        nn.GroupNorm(groups, outputs),
+        nn.ReLU(inplace=True),
+    )
+
+
+class MaskSegmenter(nn.Module):
+    """U-Net over 16 input channels ([B, 16, H, W], any H, W) → object logits [B, H, W]."""
+
+    def __init__(self, config: SegmenterConfig = SegmenterConfig()):
+        super().__init__()
+        self.config = config
+        c, g = config.channels, config.groups
+        levels = len(c)
+        self.down = nn.ModuleList(
+            _block(INPUT_CHANNELS if i == 0 else c[i - 1], c[i], g, 2 if i == levels - 1 else 1)
+            for i in range(levels)
+        )
+        self.up = nn.ModuleList(_block(c[i + 1] + c[i], c[i], g) for i in range(levels - 1))
+        self.head = nn.Conv2d(c[0], 1, 1)
+        self.stride = 2 ** (levels - 1)
+
+    def forward(self, x: Tensor) -> Tensor:
+        height, width = x.shape[-2:]
+        x = F.pad(x, (0, (-width) % self.stride, 0, (-height) % self.stride), mode="replicate")
+        skips = []
+        for i, block in enumerate(self.down):
+            x = block(x if i == 0 else F.max_pool2d(x, 2))
+            skips.append(x)
+        for i in reversed(range(len(self.up))):
+            skip = skips[i]
+            x = F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False)
+            x = self.up[i](torch.cat([x, skip], 1))
+        return self.head(x)[:, 0, :height, :width]
+
+
+def clip_references(frames: Tensor) -> Tensor:  # [T, H, W, 3] in [0, 1] → [3, 3, H, W]
+    """``A`` (mean of frames 0–1), ``Z`` (median of the last three), ``M`` (median of all),
+    channels first."""
+    first = frames[:2].mean(0)
+    last = frames[-3:].median(0).values
+    middle = frames.median(0).values
+    return torch.stack([first, last, middle]).permute(0, 3, 1, 2)
+
+
+def frame_inputs(
+    frames: Tensor,  # [t, H, W, 3] in [0, 1]: some frames of the clip
+    references: Tensor,  # [3, 3, H, W] from clip_references
+    times: Tensor,  # [t] clip time of each frame in [0, 1]
+) -> Tensor:  # [t, 16, H, W]
+    f = frames.permute(0, 3, 1, 2)
+    first, last, middle = references
+    time = times[:, None, None, None].to(f).expand(-1, 1, *f.shape[-2:])
+    return torch.cat([f, f - first, f - last, f - middle, (first - last).expand_as(f), time], 1)
+
+
+@torch.no_grad()
+def segment_clip(model: MaskSegmenter, frames: Tensor) -> Tensor:
+    """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera)."""
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
+        raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
+    frames = frames.float()
+    references = clip_references(frames)
+    times = torch.linspace(0, 1, frames.shape[0])
+    masks = []
+    for start in range(0, frames.shape[0], FRAMES_PER_CALL):
+        part = slice(start, start + FRAMES_PER_CALL)
+        masks.append(model(frame_inputs(frames[part], references, times[part])) > 0)
+    return torch.cat(masks).float()
+
+
+def save_mask_segmenter(model: MaskSegmenter, path: str | os.PathLike, training: dict) -> Path:
+    """Weights (safetensors) + ``NAME.json`` (config and how it was trained), atomically."""
+    from safetensors.torch import save_file
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tensors = {k: v.detach().float().cpu().contiguous() for k, v in model.state_dict().items()}
+    with atomic_file(path) as tmp:
+        save_file(tensors, str(tmp), {"format": FORMAT})
+    config = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(model.config).items()}
+    metadata = {"format": FORMAT, "version": VERSION, "segmenter": config, "training": training}
+    with atomic_file(path.with_suffix(".json")) as tmp:
+        tmp.write_text(json.dumps(metadata, indent=1) + "\n")
+    return path
+
+
+def load_mask_segmenter(path: str | os.PathLike | None = None) -> MaskSegmenter:
+    """The segmenter at ``path`` (a .safetensors file or a ``train-masks`` OUT folder; default:
+    the shipped one), in eval mode; InputError naming the file when missing or corrupt."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    path = SHIPPED_MASKS_PATH if path is None else Path(path)
+    if path.is_dir():
+        path = path / "model.safetensors"
+    json_path = path.with_suffix(".json")
+    if not path.is_file() or not json_path.is_file():
+        raise InputError(
+            "mask segmenter not found (weights + .json; train one with `reconphys train-masks`)",
+            source=str(path),
+        )
+    metadata = read_json(json_path, FORMAT, VERSION)
+    try:
+        model = MaskSegmenter(SegmenterConfig.from_dict(metadata["segmenter"]))
+        model.load_state_dict(load_file(str(path)))
+    except (KeyError, TypeError, ValueError, RuntimeError, SafetensorError, OSError) as e:
+        message = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(f"cannot load the mask segmenter ({message})", source=str(path)) from None
+    return model.eval()

@@ -1,0 +1,290 @@
+"""The ``realistic`` look (docs/design.md#synthetic-dataset): the object in a scene as filmed.
+
+A textured ground plane z = 0, a backdrop at infinity (an environment: horizon-to-zenith gradient
+with vertical bands, like walls and furniture seen from afar), a directional light that shades the
+object and casts a soft shadow on the ground, and sensor noise. The scene is drawn analytically per
+pixel (a ray–plane intersection), so it needs no mesh; the object is the usual Gaussian render,
+composited over it (``rgb + (1 − alpha) · scene``, the renderer's colour being premultiplied).
+
+Object shading uses radial normals (from the object's current centroid to each Gaussian): no
+normals are stored with Gaussians, and radial ones turn with the object as it tumbles. The
+shadow is a splat of the anchors projected along the light onto the ground, softer and fainter the
+higher they are; it is an appearance cue, not a physical light transport.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from ..assets.gaussians import SH_C0, Gaussians
+from .cameras import Cameras
+
+GROUND_PATTERNS = ("checker", "stripes", "tiles", "noise")
+NOISE_GRID = 16  # cells of the periodic value-noise textures
+FOG_DISTANCE = 12.0  # metres: the ground fades into the horizon colour beyond this
+SHADOW_GRID = 64  # cells per side of the shadow map around the object's footprint
+
+
+@dataclass(frozen=True)
+class SceneLook:
+    """Everything random about one scene (colours RGB in [0, 1], lengths in metres)."""
+
+    ground_pattern: str  # one of GROUND_PATTERNS
+    ground_colors: tuple[tuple[float, float, float], tuple[float, float, float]]
+    ground_period: float  # metres per pattern repeat
+    ground_angle: float  # radians: the pattern's rotation about z
+    horizon_color: tuple[float, float, float]
+    zenith_color: tuple[float, float, float]
+    band_contrast: float  # in [0, 1): strength of the backdrop's vertical bands
+    light_direction: tuple[float, float, float]  # unit vector towards the light, z > 0
+    ambient: float  # share of the light that is not direct (fills shadows)
+    noise_sigma: float  # sensor noise, standard deviation in [0, 1] colour units
+    texture_seed: int
+
+    def to_dict(self) -> dict:
+        return {
+            "ground_pattern": self.ground_pattern,
+            "ground_colors": [list(c) for c in self.ground_colors],
+            "ground_period": self.ground_period,
+            "ground_angle": self.ground_angle,
+            "horizon_color": list(self.horizon_color),
+            "zenith_color": list(self.zenith_color),
+            "band_contrast": self.band_contrast,
+            "light_direction": list(self.light_direction),
+            "ambient": self.ambient,
+            "noise_sigma": self.noise_sigma,
+            "texture_seed": self.texture_seed,
+        }
+
+
+def draw_look(rng: np.random.Generator, noise_range: tuple[float, float]) -> SceneLook:
+    """A random scene: muted ground colours (floors are rarely saturated), a backdrop that is
+    brighter towards the zenith, a light 30–70° above the horizon from any side."""
+
+    def colour(low: float, high: float, saturation: float) -> tuple[float, float, float]:
+        grey = rng.uniform(low, high)
+        tint = rng.uniform(-saturation, saturation, 3)
+        return tuple(float(np.clip(grey + t, 0.0, 1.0)) for t in tint)
+
+    base = colour(0.15, 0.75, 0.12)
+    second = tuple(float(np.clip(c * rng.uniform(0.5, 0.85), 0, 1)) for c in base)
+    elevation = rng.uniform(math.radians(30), math.radians(70))
+    azimuth = rng.uniform(0, 2 * math.pi)
+    light = (
+        math.cos(elevation) * math.cos(azimuth),
+        math.cos(elevation) * math.sin(azimuth),
+        math.sin(elevation),
+    )
+    return SceneLook(
+        ground_pattern=str(rng.choice(GROUND_PATTERNS)),
+        ground_colors=(base, second),
+        ground_period=float(rng.uniform(0.1, 0.6)),
+        ground_angle=float(rng.uniform(0, math.pi)),
+        horizon_color=colour(0.3, 0.85, 0.15),
+        zenith_color=colour(0.5, 0.95, 0.1),
+        band_contrast=float(rng.uniform(0.0, 0.5)),
+        light_direction=light,
+        ambient=float(rng.uniform(0.35, 0.7)),
+        noise_sigma=float(rng.uniform(*noise_range)),
+        texture_seed=int(rng.integers(0, 2**31 - 1)),
+    )
+
+
+def _value_noise(u: Tensor, v: Tensor, grid: Tensor) -> Tensor:
+    """Periodic bilinear value noise: coordinates [...] in grid cells, grid [G, G] → [...]."""
+    size = grid.shape[0]
+    u0, v0 = torch.floor(u), torch.floor(v)
+    fu, fv = u - u0, v - v0
+    fu, fv = fu * fu * (3 - 2 * fu), fv * fv * (3 - 2 * fv)  # smoothstep: no grid lines
+    i0, j0 = u0.long() % size, v0.long() % size
+    i1, j1 = (i0 + 1) % size, (j0 + 1) % size
+    top = grid[i0, j0] * (1 - fu) + grid[i1, j0] * fu
+    bottom = grid[i0, j1] * (1 - fu) + grid[i1, j1] * fu
+    return top * (1 - fv) + bottom * fv
+
+
+def _ground_albedo(xy: Tensor, look: SceneLook, generator: torch.Generator) -> Tensor:
+    """Ground colour at world points xy [..., 2] → [..., 3]."""
+    c, s = math.cos(look.ground_angle), math.sin(look.ground_angle)
+    u = (c * xy[..., 0] + s * xy[..., 1]) / look.ground_period
+    v = (-s * xy[..., 0] + c * xy[..., 1]) / look.ground_period
+    grid = torch.rand(NOISE_GRID, NOISE_GRID, generator=generator, dtype=xy.dtype)
+    grain = _value_noise(u * 4, v * 4, grid)  # fine grain on every pattern
+    if look.ground_pattern == "checker":
+        blend = ((torch.floor(u) + torch.floor(v)) % 2).to(xy.dtype)
+    elif look.ground_pattern == "stripes":  # planks: stripes with a grain along them
+        blend = 0.5 + 0.5 * torch.sin(2 * math.pi * u) * (0.6 + 0.4 * grain)
+    elif look.ground_pattern == "tiles":  # tiles with dark grout lines
+        fu, fv = u - torch.floor(u), v - torch.floor(v)
+        grout = (fu < 0.06) | (fv < 0.06)
+        blend = torch.where(grout, torch.ones_like(u), 0.3 * grain)
+    else:  # "noise": concrete, carpet
+        blend = _value_noise(u, v, grid)
+    blend = (0.85 * blend + 0.15 * grain).clamp(0, 1)[..., None]
+    first = torch.tensor(look.ground_colors[0], dtype=xy.dtype)
+    second = torch.tensor(look.ground_colors[1], dtype=xy.dtype)
+    return first * (1 - blend) + second * blend
+
+
+def _backdrop(direction: Tensor, look: SceneLook, generator: torch.Generator) -> Tensor:
+    """Colour of the environment seen along unit directions [..., 3] → [..., 3]."""
+    elevation = torch.asin(direction[..., 2].clamp(-1, 1))
+    azimuth = torch.atan2(direction[..., 1], direction[..., 0])
+    t = (elevation / (math.pi / 3)).clamp(0, 1)[..., None]
+    horizon = torch.tensor(look.horizon_color, dtype=direction.dtype)
+    zenith = torch.tensor(look.zenith_color, dtype=direction.dtype)
+    grid = torch.rand(NOISE_GRID, NOISE_GRID, generator=generator, dtype=direction.dtype)
+    bands = _value_noise(azimuth / (2 * math.pi) * NOISE_GRID, torch.zeros_like(azimuth), grid)
+    shade = 1 - look.band_contrast * bands[..., None] * (1 - t)
+    return (horizon * (1 - t) + zenith * t) * shade
+
+
+def pixel_rays(cameras: Cameras, supersample: int = 1) -> tuple[Tensor, Tensor]:
+    """World-frame origins [C, 3] and unit directions [C, H·s, W·s, 3] of the pixels' rays
+    (pixel centres at u + 0.5; ``supersample`` s rays per pixel side)."""
+    s = supersample
+    dtype = torch.float64
+    u = (torch.arange(cameras.width * s, dtype=dtype) + 0.5) / s
+    v = (torch.arange(cameras.height * s, dtype=dtype) + 0.5) / s
+    grid_v, grid_u = torch.meshgrid(v, u, indexing="ij")
+    pixels = torch.stack([grid_u, grid_v, torch.ones_like(grid_u)], -1)  # [H, W, 3]
+    K = cameras.K.to(dtype)
+    world_to_cam = cameras.world_to_cam.to(dtype)
+    rotation = world_to_cam[..., :3, :3]  # [C, 3, 3]
+    origins = -(rotation.transpose(-1, -2) @ world_to_cam[..., :3, 3:])[..., 0]  # [C, 3]
+    in_camera = torch.einsum("cij,hwj->chwi", torch.linalg.inv(K), pixels)
+    directions = torch.einsum("cji,chwj->chwi", rotation, in_camera)
+    return origins, directions / directions.norm(dim=-1, keepdim=True)
+
+
+@dataclass
+class SceneBackground:
+    """The empty scene seen by C cameras (supersampled and averaged to the image size)."""
+
+    ground_direct: Tensor  # [C, H·s, W·s, 3] the ground's colour from the direct light (0 off it)
+    ground_xy: Tensor  # [C, H·s, W·s, 2] world xy of each ground ray's hit (0 off the ground)
+    on_ground: Tensor  # [C, H·s, W·s] bool
+    backdrop: Tensor  # [C, H, W, 3] the lit empty scene, no shadow
+    supersample: int
+
+
+def scene_background(cameras: Cameras, look: SceneLook, supersample: int = 2) -> SceneBackground:
+    """The lit empty scene for every camera (no batch dims)."""
+    generator = torch.Generator().manual_seed(look.texture_seed)
+    origins, directions = pixel_rays(cameras, supersample)
+    oz = origins[:, 2, None, None]
+    dz = directions[..., 2]
+    t = torch.where(dz < -1e-9, -oz / dz.clamp(max=-1e-9), torch.full_like(dz, math.inf))
+    on_ground = torch.isfinite(t)
+    hit = origins[:, None, None, :2] + t.nan_to_num(0, posinf=0)[..., None] * directions[..., :2]
+    ground = _ground_albedo(hit, look, generator)
+    sky = _backdrop(directions, look, torch.Generator().manual_seed(look.texture_seed + 1))
+    fog = torch.exp(-t.nan_to_num(0, posinf=1e9) / FOG_DISTANCE)[..., None]
+    horizon = torch.tensor(look.horizon_color, dtype=ground.dtype)
+    light_z = look.light_direction[2]
+    ground_lit = ground * (look.ambient + (1 - look.ambient) * light_z)
+    ground_lit = ground_lit * fog + horizon * (1 - fog)
+    lit = torch.where(on_ground[..., None], ground_lit, sky)
+    direct = ground * (1 - look.ambient) * light_z * fog
+    return SceneBackground(
+        ground_direct=torch.where(on_ground[..., None], direct, torch.zeros_like(direct)),
+        ground_xy=torch.where(on_ground[..., None], hit, torch.zeros_like(hit)),
+        on_ground=on_ground,
+        backdrop=_downsample(lit, supersample),
+        supersample=supersample,
+    )
+
+
+def _downsample(images: Tensor, factor: int) -> Tensor:  # [..., H·f, W·f, ch] → [..., H, W, ch]
+    if factor == 1:
+        return images
+    *lead, hf, wf, ch = images.shape
+    blocks = images.reshape(*lead, hf // factor, factor, wf // factor, factor, ch)
+    return blocks.mean(dim=(-4, -2))
+
+
+def shadow_cover(
+    points: Tensor,  # [P, 3] occluders (e.g. anchors) at one instant, metres
+    ground_xy: Tensor,  # [..., 2] ground points, metres
+    light_direction: tuple[float, float, float],
+    spacing: float,  # typical distance between neighbouring points, metres
+    grid: int = SHADOW_GRID,
+) -> Tensor:  # [...] share of the direct light blocked, in [0, 1)
+    """Soft shadow of a point cloud: each point, projected along the light onto z = 0, blocks a
+    Gaussian footprint of width ``spacing/2 + 0.15·height`` whose weight falls as the footprint
+    widens (a lifted object casts a fainter, blurrier shadow); the cover saturates as
+    ``1 − exp(−Σ)``. It is evaluated on a ``grid``² map over the footprints (±3 widths) and read
+    bilinearly at ``ground_xy`` (zero outside the map)."""
+    dtype = ground_xy.dtype
+    light = torch.tensor(light_direction, dtype=dtype)
+    height = points[:, 2].to(dtype).clamp_min(0)
+    foot = points[:, :2].to(dtype) - height[:, None] * light[:2] / light[2]  # [P, 2]
+    sigma = 0.5 * spacing + 0.15 * height  # [P]
+    weight = (0.5 * spacing / sigma) ** 2
+    lower = (foot - 3 * sigma[:, None]).amin(0)
+    upper = (foot + 3 * sigma[:, None]).amax(0)
+    axes = [torch.linspace(float(lower[i]), float(upper[i]), grid, dtype=dtype) for i in (0, 1)]
+    cells = torch.stack(torch.meshgrid(*axes, indexing="xy"), -1).reshape(-1, 2)  # [G·G, 2]
+    d2 = torch.cdist(cells, foot).square()
+    total = (weight * torch.exp(-0.5 * d2 / sigma.square())).sum(-1)
+    cover = (1 - torch.exp(-total)).reshape(1, 1, grid, grid)  # rows: y, columns: x
+    where = 2 * (ground_xy.reshape(1, 1, -1, 2) - lower) / (upper - lower) - 1
+    read = F.grid_sample(cover, where, mode="bilinear", padding_mode="zeros", align_corners=True)
+    return read.reshape(ground_xy.shape[:-1])
+
+
+def shade_gaussians(gaussians: Gaussians, look: SceneLook) -> Gaussians:
+    """Lambertian shading of the Gaussians' colours by the look's light, with radial normals
+    (from the centroid of the means [..., N, 3] of each set)."""
+    means = gaussians.means
+    normals = means - means.mean(dim=-2, keepdim=True)
+    normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+    light = torch.tensor(look.light_direction, dtype=means.dtype, device=means.device)
+    lambert = (normals @ light).clamp_min(0)[..., None]
+    factor = look.ambient + (1 - look.ambient) * lambert
+    colors = gaussians.colors * factor
+    return Gaussians(
+        means=means,
+        quats=gaussians.quats,
+        log_scales=gaussians.log_scales,
+        opacity_logits=gaussians.opacity_logits,
+        sh0=(colors - 0.5) / SH_C0,
+    )
+
+
+def composite_in_scene(
+    rgb: Tensor,  # [C, T, H, W, 3] premultiplied object colour (already shaded)
+    alpha: Tensor,  # [C, T, H, W]
+    occluders: Tensor,  # [T, P, 3] shadow-casting points per frame, metres
+    background: SceneBackground,
+    look: SceneLook,
+    spacing: float,  # metres between neighbouring occluders
+) -> Tensor:  # [C, T, H, W, 3] in [0, 1]
+    """The object over the scene, with its shadow darkening the ground's direct light."""
+    s = background.supersample
+    frames = []
+    for t in range(rgb.shape[1]):
+        cover = torch.zeros(background.on_ground.shape, dtype=torch.float64)
+        where = background.on_ground
+        cover[where] = shadow_cover(
+            occluders[t].double(), background.ground_xy[where], look.light_direction, spacing
+        )
+        darkening = _downsample(background.ground_direct * cover[..., None], s)
+        scene = (background.backdrop - darkening).clamp(0, 1).to(rgb.dtype)
+        frames.append(rgb[:, t] + (1 - alpha[:, t, ..., None]) * scene)
+    return torch.stack(frames, 1).clamp(0, 1)
+
+
+def add_sensor_noise(frames: Tensor, sigma: float, seed: int) -> Tensor:
+    """Gaussian read noise of standard deviation ``sigma`` on [..., 3] frames in [0, 1]."""
+    if sigma <= 0:
+        return frames
+    generator = torch.Generator().manual_seed(seed)
+    noise = torch.randn(frames.shape, generator=generator, dtype=frames.dtype)
+    return (frames + sigma * noise).clamp(0, 1)

@@ -1,0 +1,103 @@
+"""The camera and ground read from a video (capture/calibrate.py), on exact silhouettes of a ball
+that falls under gravity and comes to rest on the ground, filmed by a known camera: the scale
+comes from g alone, the ground from where the ball rests; too short a fall is refused."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from reconphys.capture.calibrate import estimate_camera
+from reconphys.errors import InputError
+from reconphys.render.cameras import intrinsics_from_fov, look_at
+
+G = 9.81
+
+
+def ball_masks(
+    pitch_deg: float, distance: float, drop: float, radius: float, size: int = 96, fov=45.0
+):
+    """Masks [30, size, size] of a ball released from rest ``drop`` m above the ground, landing
+    without bounce, seen by a camera pitched down by ``pitch_deg`` aimed at its landing point
+    from ``distance`` m; returns the masks, the camera's world_to_cam and the ball's path."""
+    dt = 0.03
+    heights = [radius + max(drop - 0.5 * G * (k * dt) ** 2, 0.0) for k in range(30)]
+    centres = np.array([[0.0, 0.0, z] for z in heights])
+    pitch = math.radians(pitch_deg)
+    target = np.array([0.0, 0.0, radius + 0.5 * drop])
+    eye = target + distance * np.array([math.cos(pitch), 0.0, math.sin(pitch)])
+    w2c = look_at(torch.tensor(eye), torch.tensor(target)).numpy()
+    K = intrinsics_from_fov(fov, size, size, dtype=torch.float64).numpy()
+    v, u = np.mgrid[0:size, 0:size] + 0.5
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    masks = []
+    for c in centres:
+        cam = w2c[:3, :3] @ c + w2c[:3, 3]
+        along = rays @ cam
+        closest = np.linalg.norm(rays * along[..., None] - cam, axis=-1)
+        masks.append((closest <= radius) & (along > 0))
+    return torch.from_numpy(np.stack(masks)).float(), w2c, centres
+
+
+@pytest.mark.parametrize("pitch_deg", [8.0, 25.0])
+def test_the_pitch_is_weakly_observed_and_costs_scale_within_ten_percent(pitch_deg):
+    """A fall barely shows the camera's pitch (a prior of 15° ± 30° holds it): 8° and 25° come
+    back near 15°, which costs the distance (∝ cos θ) a few per cent."""
+    masks, w2c, centres = ball_masks(pitch_deg, 2.0, 0.45, 0.1)
+    estimate = estimate_camera(masks, 0.03, fov_deg=45.0)
+    true_distance = float(np.linalg.norm(w2c[:3, :3] @ centres[0] + w2c[:3, 3]))
+    assert abs(estimate.pitch_deg - 15.0) < abs(pitch_deg - 15.0)
+    assert estimate.distance == pytest.approx(true_distance, rel=0.1)
+
+
+def test_scale_and_ground_of_a_falling_ball():
+    radius, drop, distance = 0.1, 0.45, 2.0
+    masks, w2c, centres = ball_masks(15.0, distance, drop, radius)
+    estimate = estimate_camera(masks, 0.03, fov_deg=45.0)
+    assert estimate.fall_frames >= 8 and estimate.residual_px < 0.2
+    true_distance = float(np.linalg.norm(w2c[:3, :3] @ centres[0] + w2c[:3, 3]))
+    assert estimate.distance == pytest.approx(true_distance, rel=0.02)  # the scale, from g
+    assert estimate.pitch_deg == pytest.approx(15.0, abs=1.0)
+    camera_height = float(-(w2c[:3, :3].T @ w2c[:3, 3])[2])
+    assert estimate.height == pytest.approx(camera_height, abs=0.05)
+    # the ball's frame-0 bottom, seen through the estimated camera at the estimated depth,
+    # is `drop` above the estimated ground
+    cam = w2c[:3, :3] @ (centres[0] - [0, 0, radius]) + w2c[:3, 3]
+    cam = cam * estimate.distance / true_distance
+    est = estimate.camera.world_to_cam.double().numpy()
+    world = est[:3, :3].T @ (cam - est[:3, 3])
+    # the ground goes through the silhouette's bottom moved nearer by the half-width (a box's
+    # near edge; chosen on held-out pybullet meshes): a ball's bottom is not nearer, so its
+    # ground comes out about r/2 high, its drop that much short
+    assert world[2] == pytest.approx(drop - 0.5 * radius, abs=0.02)
+    # the object starts above the origin, and the camera looks at it from the +x side
+    centre = est[:3, :3].T @ (
+        (w2c[:3, :3] @ centres[0] + w2c[:3, 3]) * estimate.distance / true_distance - est[:3, 3]
+    )
+    assert abs(centre[0]) < 0.05 and abs(centre[1]) < 0.05
+    assert float(-(est[:3, :3].T @ est[:3, 3])[0]) > 0
+
+
+def test_a_wrong_focal_length_moves_the_camera_not_the_object():
+    radius, drop = 0.1, 0.45
+    masks, *_ = ball_masks(15.0, 2.0, drop, radius, fov=45.0)
+    right = estimate_camera(masks, 0.03, fov_deg=45.0)
+    wrong = estimate_camera(masks, 0.03, fov_deg=60.0)
+    f_right, f_wrong = float(right.camera.K[1, 1]), float(wrong.camera.K[1, 1])
+    assert wrong.distance < 0.85 * right.distance  # wider view: the object is nearer
+    size_right = right.distance / f_right  # metres per pixel at the object
+    size_wrong = wrong.distance / f_wrong
+    assert size_wrong == pytest.approx(size_right, rel=0.05)
+
+
+def test_a_fall_too_short_to_show_the_scale_is_refused():
+    masks, *_ = ball_masks(15.0, 2.0, 0.004, 0.1)  # released 4 mm above the ground
+    with pytest.raises(InputError, match="--camera FILE"):
+        estimate_camera(masks, 0.03)
+    still = masks[-1:].expand(30, -1, -1).clone()  # nothing falls at all
+    with pytest.raises(InputError, match="--camera FILE"):
+        estimate_camera(still, 0.03)

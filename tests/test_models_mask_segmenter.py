@@ -1,0 +1,181 @@
+"""The mask segmenter (models/mask_segmenter.py): its inputs by hand, any image size, the shipped
+weights against a realistic scene's true masks (beside the temporal-median baseline they must
+beat), the path a recording takes through load_observation, errors, and train-masks."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from reconphys.capture import load_observation
+from reconphys.capture.masks import border_is_uniform
+from reconphys.cli import app
+from reconphys.data import GeneratedDropDataset, make_dataset, make_settings
+from reconphys.errors import InputError
+from reconphys.models.mask_segmenter import (
+    MaskSegmenter,
+    SegmenterConfig,
+    clip_references,
+    frame_inputs,
+    load_mask_segmenter,
+    segment_clip,
+)
+from reconphys.pipeline.samples import segment_frames
+from reconphys.render.video import write_mp4
+
+runner = CliRunner()
+REALISTIC = make_settings(
+    scene="realistic",
+    objects=0,
+    test_objects=2,
+    test_samples_per_object=1,
+    resolution=64,
+    num_gaussians=600,
+    num_anchors=64,
+    num_neighbors=8,
+    min_substeps=10,
+    seed=2,
+)
+
+
+def iou(prediction: torch.Tensor, truth: torch.Tensor) -> float:  # [T, H, W] → mean per frame
+    p, t = prediction > 0.5, truth > 0.5
+    return float(((p & t).sum((1, 2)) / (p | t).sum((1, 2)).clamp_min(1)).mean())
+
+
+@pytest.fixture(scope="module")
+def realistic_views():
+    """View 0 of two realistic drops (procedural objects, 64 px) with their true masks."""
+    dataset = GeneratedDropDataset(REALISTIC, views=[0])
+    views = []
+    for index in range(len(dataset)):
+        views.append((dataset[index]["frames"][0], dataset.masks(index)[0].float()))
+    return views
+
+
+def test_inputs_by_hand():
+    frames = torch.rand(5, 6, 7, 3)
+    references = clip_references(frames)
+    assert torch.allclose(references[0], frames[:2].mean(0).permute(2, 0, 1))
+    assert torch.equal(references[1], frames[2:].median(0).values.permute(2, 0, 1))
+    assert torch.equal(references[2], frames.median(0).values.permute(2, 0, 1))
+    x = frame_inputs(frames[3:4], references, torch.tensor([0.75]))
+    f = frames[3].permute(2, 0, 1)
+    assert x.shape == (1, 16, 6, 7)
+    assert torch.equal(x[0, :3], f) and torch.allclose(x[0, 3:6], f - references[0])
+    assert torch.allclose(x[0, 6:9], f - references[1])
+    assert torch.allclose(x[0, 12:15], references[0] - references[1])
+    assert bool((x[0, 15] == 0.75).all())
+
+
+def test_any_image_size_and_mirror_equivariance_of_the_padding():
+    model = MaskSegmenter(SegmenterConfig(channels=(8, 8, 8, 8))).eval()
+    for height, width in ((30, 22), (9, 41), (64, 64)):
+        assert model(torch.randn(2, 16, height, width)).shape == (2, height, width)
+    with pytest.raises(ValueError, match="T ≥ 3"):
+        segment_clip(model, torch.rand(2, 8, 8, 3))
+
+
+def test_shipped_segmenter_finds_the_object_in_a_realistic_scene(realistic_views):
+    model = load_mask_segmenter()
+    for frames, truth in realistic_views:
+        masks = segment_clip(model, frames)
+        assert masks.shape == truth.shape and set(masks.unique().tolist()) <= {0.0, 1.0}
+        median = (frames - frames.median(0).values).norm(dim=-1) > 0.08  # the baseline
+        learned, baseline = iou(masks, truth), iou(median.float(), truth)
+        assert learned > 0.75 and learned > baseline + 0.1, (learned, baseline)  # 0.86, 0.82
+        assert not border_is_uniform(frames)  # the border-colour path cannot serve it
+
+
+def test_a_recording_without_masks_or_plate_goes_through_the_segmenter(realistic_views, tmp_path):
+    frames, truth = realistic_views[0]
+    video = tmp_path / "drop.mp4"
+    write_mp4(video, (frames.numpy() * 255).round().astype(np.uint8), fps=1 / 0.03)
+    observation = load_observation(video, segment=segment_frames, camera="dataset")
+    assert observation.mask_source.startswith("mask segmenter")
+    assert iou(observation.masks, truth) > 0.7
+    outside = observation.masks < 0.5
+    assert float(observation.frames[outside].abs().max()) == 0.0  # background set to black
+    # without a segmenter the border colour is all there is, and the masks are refused
+    with pytest.raises(InputError, match="--masks DIR"):
+        load_observation(video)
+    # object on black: the border is one colour and background subtraction serves
+    black = np.zeros((30, 32, 32, 3), np.uint8)
+    for t in range(30):
+        black[t, 4 + t // 3 : 10 + t // 3, 12:18] = 200
+    write_mp4(tmp_path / "black.mp4", black, fps=1 / 0.03)
+    plain = load_observation(tmp_path / "black.mp4", segment=segment_frames, camera="dataset")
+    assert plain.mask_source == "background subtraction (border colour)"
+
+
+def test_missing_or_corrupt_weights_are_one_line_errors(tmp_path):
+    with pytest.raises(InputError, match="mask segmenter not found"):
+        load_mask_segmenter(tmp_path / "none.safetensors")
+    bad = tmp_path / "bad.safetensors"
+    bad.write_bytes(b"not a safetensors file")
+    meta = {"format": "reconphys.mask_segmenter", "version": 1, "segmenter": {}, "training": {}}
+    bad.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(InputError, match="cannot load the mask segmenter"):
+        load_mask_segmenter(bad)
+
+
+def test_train_masks_writes_a_loadable_model_and_refuses_plain_data(tmp_path):
+    data = tmp_path / "data"
+    make_dataset(replace(REALISTIC, resolution=24, test_objects=0, objects=1), data, workers=1)
+    out = tmp_path / "run"
+    command = ["train-masks", "--data", str(data), "--out", str(out), "--steps", "3"]
+    command += ["--batch-size", "2", "--crop", "16", "--threads", "1", "--no-progress"]
+    result = runner.invoke(app, command)
+    assert result.exit_code == 0, result.output
+    model = load_mask_segmenter(out)
+    assert model(torch.zeros(1, 16, 24, 24)).shape == (1, 24, 24)
+    lines = (out / "log.jsonl").read_text().splitlines()
+    assert [json.loads(line)["step"] for line in lines] == [1, 2, 3]
+    # a plain dataset has no masks to learn from
+    plain = tmp_path / "plain"
+    make_dataset(replace(REALISTIC, scene="plain", resolution=16, objects=1, test_objects=0), plain)
+    result = runner.invoke(app, [*command[:2], str(plain), "--out", str(tmp_path / "run2")])
+    assert result.exit_code != 0 and "stores no masks" in result.output
+
+
+def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
+    realistic_views, tmp_path
+):
+    """The user's path with nothing but the mp4: masks by the segmenter, the camera estimated
+    (recorded in prediction.json), the asset written; `--camera dataset` is the old default.
+    The other view's object is thrown down and lands in frame 6: too short a fall to read the
+    scale from, which is refused."""
+    short, _ = realistic_views[0]
+    write_mp4(tmp_path / "short.mp4", (short.numpy() * 255).round().astype(np.uint8), 1 / 0.03)
+    out = tmp_path / "refused"
+    result = runner.invoke(app, ["predict", str(tmp_path / "short.mp4"), "--out", str(out)])
+    assert result.exit_code == 2 and "--camera FILE" in result.output and not out.exists()
+    frames, _ = realistic_views[1]
+    video = tmp_path / "drop.mp4"
+    write_mp4(video, (frames.numpy() * 255).round().astype(np.uint8), fps=1 / 0.03)
+    out = tmp_path / "asset"
+    flags = ["--no-refine", "--preview-frames", "0"]
+    result = runner.invoke(app, ["predict", str(video), "--out", str(out), *flags])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "prediction.json").read_text())
+    read = summary["input"]
+    assert read["masks"].startswith("mask segmenter")
+    assert read["camera"] == "estimated from the video"
+    estimate = read["camera_estimate"]
+    assert estimate["fall_frames"] >= 4 and estimate["fov_deg"] == 45.0
+    assert 0.3 < estimate["distance_m"] < 20 and estimate["camera_height_m"] > 0
+    out2 = tmp_path / "asset2"
+    command = ["predict", str(video), "--out", str(out2), "--camera", "dataset", *flags]
+    result = runner.invoke(app, command)
+    assert result.exit_code == 0, result.output
+    read = json.loads((out2 / "prediction.json").read_text())["input"]
+    assert "camera_estimate" not in read and read["camera"].startswith("default")
+    result = runner.invoke(
+        app, ["predict", str(video), "--out", str(tmp_path / "a3"), "--fov", "0"]
+    )
+    assert result.exit_code == 2 and "--fov" in result.output
