@@ -67,7 +67,8 @@ def main() -> None:
             item = dataset[index]
             bundle = Path(folder) / meta["id"]
             bundle.mkdir()
-            shutil.copyfile(root / meta["dir"] / video_name(0), bundle / "video.mp4")
+            entry = dataset.samples[index]
+            shutil.copyfile(root / entry["dir"] / video_name(0), bundle / "video.mp4")
             height, width = item["frames"].shape[2:4]
             K, w2c = item["K"][0].double(), item["world_to_cam"][0].double()
             write_camera(bundle / "camera.json", CameraSpec(K, w2c, width, height))

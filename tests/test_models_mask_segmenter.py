@@ -22,6 +22,7 @@ from reconphys.models.mask_segmenter import (
     SegmenterConfig,
     clip_references,
     frame_inputs,
+    keep_main_blob,
     load_mask_segmenter,
     segment_clip,
 )
@@ -71,6 +72,21 @@ def test_inputs_by_hand():
     assert torch.allclose(x[0, 6:9], f - references[1])
     assert torch.allclose(x[0, 12:15], references[0] - references[1])
     assert bool((x[0, 15] == 0.75).all())
+
+
+def test_specks_and_strips_are_dropped_pieces_of_the_object_kept():
+    masks = torch.zeros(2, 20, 20, dtype=torch.bool)
+    masks[0, 5:12, 5:12] = True  # the object: 49 px
+    masks[0, 5:12, 14:17] = True  # a second piece of it: 21 px (≥ 20 % of 49)
+    masks[0, 0, :] = True  # a strip along the top edge: 20 px, big enough to stay (check_masks)
+    masks[0, 18, 18] = True  # a speck
+    masks[1, 0, :] = True  # frame 1: a 20-px strip and a 3-px object: the strip is the largest
+    masks[1, 10, 10:13] = True
+    kept = keep_main_blob(masks)
+    assert bool(kept[0, 5:12, 5:12].all()) and bool(kept[0, 5:12, 14:17].all())
+    assert not bool(kept[0, 18, 18]) and int(kept[0].sum()) == 49 + 21 + 20
+    assert int(kept[1].sum()) == 20  # the largest region wins; check_masks then refuses it
+    assert torch.equal(keep_main_blob(masks[:1, 5:12, 5:12]), masks[:1, 5:12, 5:12])
 
 
 def test_any_image_size_and_mirror_equivariance_of_the_padding():

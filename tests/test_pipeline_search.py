@@ -21,9 +21,11 @@ from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.pipeline.samples import load_sample
 from reconphys.pipeline.search import (
     attributes_of,
+    lighting_gain,
     observable_bounds,
     observables,
     profile_interval,
+    scaled_colours,
     search,
     substep_groups,
     temperature_for,
@@ -214,3 +216,23 @@ def test_a_clip_that_ends_before_the_contact_shows_no_observable(sample):
     for i, (name, (low, high)) in enumerate(history["intervals"].items()):
         prior = 0.8 * float(bounds[i, 1] - bounds[i, 0])
         assert high - low > 0.7 * prior, (name, low, high)
+
+
+def test_the_scene_light_is_measured_and_divided_out_of_the_comparison(sample):
+    """A recording whose object shows darker (the realistic look's light and shading) is read by
+    its per-channel gain; the plain renders' gain is 1; and the search on the darkened frames
+    keeps its error floor at the plain one's instead of the colour difference."""
+    observation, truth = sample
+    camera = observation.camera
+    plain = lighting_gain(truth.asset.gaussians, observation.frames[0], camera)
+    assert torch.allclose(plain, torch.ones(3), atol=0.03)
+    light = torch.tensor([0.5, 0.7, 0.9])
+    darker = observation.frames * light
+    assert torch.allclose(lighting_gain(truth.asset.gaussians, darker[0], camera), light, atol=0.03)
+    scaled = scaled_colours(truth.asset.gaussians, light)
+    assert torch.allclose(scaled.colors, (truth.asset.gaussians.colors * light).clamp(0, 1))
+    frames = observation.frames[:12]
+    _, bright = search(truth.asset, frames, camera, spans=(0.25,), profiles=False)
+    _, dark = search(truth.asset, frames * light, camera, spans=(0.25,), profiles=False)
+    assert dark["lighting_gain"] == pytest.approx(light.tolist(), abs=0.03)
+    assert dark["error"] < 2 * bright["error"] + 1e-4

@@ -11,9 +11,10 @@ In order of preference:
    colour. Limits: the object must differ in colour from the backdrop by more than
    ``tolerance``; the camera must not move; shadows and reflections darker/brighter than the
    tolerance count as object;
-4. otherwise (a floor, a wall, shadows in view, no clean plate) the mask segmenter
-   (models/mask_segmenter.py), which reads the background from the clip itself; the caller
-   passes it in (``load_observation(segment=...)``), as it lives above this layer.
+4. otherwise (a floor, a wall, shadows in view, no clean plate; or a one-colour border whose
+   masks fail :func:`check_masks`) the mask segmenter (models/mask_segmenter.py), which reads
+   the background from the clip itself; the caller passes it in
+   (``load_observation(segment=...)``), as it lives above this layer.
 
 Masks are float [T, H, W] in {0, 1}.
 """

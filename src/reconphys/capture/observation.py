@@ -98,6 +98,18 @@ def stored_observation(
     )
 
 
+def _plausible(masks: Tensor, uniform_border: bool) -> bool:
+    """Whether the border colour's masks can stand: a one-colour border and masks that pass
+    :func:`check_masks` (a floor near the border's colour can pass the first, not the second)."""
+    if not uniform_border:
+        return False
+    try:
+        check_masks(masks, "border colour")
+    except InputError:
+        return False
+    return True
+
+
 def load_observation(
     input: str | os.PathLike,
     *,
@@ -142,16 +154,17 @@ def load_observation(
     recorded = raw.shape[0]
     raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3].astype(np.float32) / 255.0)
-    if all_masks is None and background is None and segment and not border_is_uniform(rgb):
-        chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
-        mask_source = "mask segmenter (no clean plate; the backdrop is not one colour)"
-    elif all_masks is None:
-        plate = read_background(background, height, width) if background is not None else None
-        chosen = subtract_background(rgb, plate)
-        reference = f"clean plate {background}" if plate is not None else "border colour"
-        mask_source = f"background subtraction ({reference})"
-    else:
+    if all_masks is not None:
         chosen = all_masks[torch.from_numpy(picks)]
+    elif background is not None:
+        chosen = subtract_background(rgb, read_background(background, height, width))
+        mask_source = f"background subtraction (clean plate {background})"
+    else:
+        chosen = subtract_background(rgb)
+        mask_source = "background subtraction (border colour)"
+        if segment is not None and not _plausible(chosen, border_is_uniform(rgb)):
+            chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
+            mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
     check_masks(chosen, str(masks) if masks is not None else str(path))
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where the object rests

@@ -20,6 +20,7 @@ import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
@@ -35,6 +36,7 @@ SHIPPED_MASKS_PATH = (
     Path(__file__).resolve().parent.parent / "weights" / "mask_segmenter.safetensors"
 )
 FRAMES_PER_CALL = 8  # bounds memory at large resolutions
+MAIN_BLOB_SHARE = 0.2  # regions smaller than this share of the largest are dropped
 
 
 @dataclass(frozen=True)
@@ -121,7 +123,23 @@ def segment_clip(model: MaskSegmenter, frames: Tensor) -> Tensor:
     for start in range(0, frames.shape[0], FRAMES_PER_CALL):
         part = slice(start, start + FRAMES_PER_CALL)
         masks.append(model(frame_inputs(frames[part], references, times[part])) > 0)
-    return torch.cat(masks).float()
+    return keep_main_blob(torch.cat(masks)).float()
+
+
+def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:
+    """Per frame [T, H, W] bool, keep the connected regions (8-neighbourhood) at least ``share``
+    of the largest one's size: one object, maybe in pieces (a thin link seen edge-on), without
+    the specks and strips (a horizon, a shadow's edge) the network marks elsewhere."""
+    from scipy import ndimage
+
+    kept = []
+    for mask in masks.cpu().numpy():
+        labels, count = ndimage.label(mask, structure=np.ones((3, 3)))
+        if count > 1:
+            sizes = np.bincount(labels.ravel())[1:]
+            mask = np.isin(labels, 1 + np.nonzero(sizes >= share * sizes.max())[0])
+        kept.append(torch.from_numpy(mask))
+    return torch.stack(kept).to(masks.device)
 
 
 def save_mask_segmenter(model: MaskSegmenter, path: str | os.PathLike, training: dict) -> Path:

@@ -35,6 +35,7 @@ import torch
 from torch import Tensor
 
 from ..assets.asset import Asset
+from ..assets.gaussians import SH_C0, Gaussians
 from ..capture import CameraSpec
 from ..capture.window import comparison_view, object_window
 from ..physics import SpringMassModel, State, deform_means, rollout, scene_stable_substeps
@@ -182,6 +183,34 @@ def photometric_errors(
     return ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
 
 
+MIN_GAIN_PIXELS = 20  # object pixels needed to measure the lighting
+
+
+def lighting_gain(
+    gaussians: Gaussians,  # the object at frame 0
+    frame: Tensor,  # [H, W, 3] the recording's frame 0, background black
+    camera: CameraSpec,
+) -> Tensor:  # [3] per-channel factor, in [0.25, 4]
+    """How much brighter (per channel) the recording shows the object than its Gaussians' colours
+    render: least squares over the pixels both cover. A scene's light and exposure scale the
+    colours (our plain renders: 1); without it the whole colour difference would count as misfit,
+    raising the error floor and flattening every profile (the realistic look's shading did)."""
+    out = render(gaussians.map(lambda t: t[None]), camera.cameras())
+    rendered, alpha = out.rgb[0, 0], out.alpha[0, 0]
+    both = (alpha > 0.5) & (frame.amax(-1) > 0)
+    if int(both.sum()) < MIN_GAIN_PIXELS:
+        return torch.ones(3)
+    seen, made = frame[both].double(), rendered[both].double()
+    gain = (seen * made).sum(0) / (made * made).sum(0).clamp_min(1e-12)
+    return gain.clamp(0.25, 4.0).float()
+
+
+def scaled_colours(gaussians: Gaussians, gain: Tensor) -> Gaussians:
+    """The Gaussians with their colours multiplied by ``gain`` [3] (clamped to [0, 1])."""
+    colours = (gaussians.colors * gain.to(gaussians.sh0)).clamp(0, 1)
+    return replace(gaussians, sh0=(colours - 0.5) / SH_C0)
+
+
 def temperature_for(pixels: int) -> tuple[float, float, float]:
     """τ of each observable's profile posterior (log k/m, log d/m, f) for a compared view of
     ``pixels`` pixels (≥ 1)."""
@@ -238,6 +267,8 @@ def search(
     started = time.perf_counter()
     window = None if masks is None else object_window(masks)
     frames, camera = comparison_view(frames, camera, resolution, window)
+    gain = lighting_gain(asset.gaussians, frames[0], camera)
+    compared = replace(asset, gaussians=scaled_colours(asset.gaussians, gain))
     size = list(frames.shape[1:3])
     if temperature is None:
         temperature = temperature_for(size[0] * size[1])
@@ -260,7 +291,7 @@ def search(
         nonlocal current, best_error
         trial = current.repeat(len(offsets), 1)
         trial[:, i] = (current[i] + offsets).clamp(*bounds[i].tolist())
-        errors = photometric_errors(asset, frames, camera, trial)
+        errors = photometric_errors(compared, frames, camera, trial)
         pick = int(errors.argmin())
         if not errors[pick] < errors[centre_at] * (1.0 - TIE):
             pick = centre_at  # the current value: kept unless another is clearly better
@@ -321,6 +352,7 @@ def search(
         "start": dict(zip(OBSERVABLES, start.tolist(), strict=True)),
         "found": dict(zip(OBSERVABLES, current.tolist(), strict=True)),
         "error": best_error,
+        "lighting_gain": [round(float(g), 4) for g in gain],  # rendered colours × this
         "intervals": intervals,  # 10–90 % of the profile posterior (natural logs of SI ratios)
         "undetermined": undetermined,  # observables the recording does not show: start kept
         "profiles": profile,  # the last profile of each observable
