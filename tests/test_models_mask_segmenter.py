@@ -195,3 +195,14 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
         app, ["predict", str(video), "--out", str(tmp_path / "a3"), "--fov", "0"]
     )
     assert result.exit_code == 2 and "--fov" in result.output
+
+
+def test_commands_that_read_object_on_black_refuse_a_realistic_dataset(tmp_path):
+    data = tmp_path / "realistic"
+    make_dataset(replace(REALISTIC, resolution=16, objects=1, test_objects=1), data, workers=1)
+    result = runner.invoke(app, ["evaluate", "--data", str(data), "--out", str(tmp_path / "ev")])
+    assert result.exit_code == 2 and "realistic-look dataset: evaluate" in result.output
+    assert "benchmarks/realistic_predict.py" in result.output and not (tmp_path / "ev").exists()
+    command = ["train-gs", "--data", str(data), "--out", str(tmp_path / "gs"), "--steps", "1"]
+    result = runner.invoke(app, command)
+    assert result.exit_code == 2 and "train-gs reads the plain look only" in result.output

@@ -105,6 +105,15 @@ class DataSettings:
         text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
+    def require_plain(self, source: str, what: str, instead: str) -> None:
+        """Refuse a realistic-look dataset where ``what`` reads object-on-black frames only."""
+        if self.scene != "plain":
+            raise InputError(
+                f"a {self.scene}-look dataset: {what} reads the plain look only (the object on "
+                f"black, masks by its colour); {instead}",
+                source=source,
+            )
+
     def samples_for(self, split: str) -> int:
         return self.samples_per_object if split == "train" else self.test_samples_per_object
 

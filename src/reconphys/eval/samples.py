@@ -84,6 +84,11 @@ class EvalSet:
         self.dataset = DropDataset(self.root, split=None if split == "all" else split)
         self.split = split
         self.settings: DataSettings = self.dataset.settings
+        self.settings.require_plain(
+            str(self.root),
+            "evaluate",
+            "measure realistic recordings with benchmarks/realistic_predict.py (docs/usage.md)",
+        )
         if len(self.dataset) == 0:
             counts = self.dataset.manifest.get("counts", {})
             have = ", ".join(f"{k}: {v.get('samples', 0)}" for k, v in counts.items())

@@ -101,6 +101,7 @@ class TrainingSamples(Dataset):
         self.views = [0, 1, 2, 3] if config.all_views else [config.view]
         if config.source == GENERATE:
             self.settings = generate_settings(config)
+            self.settings.require_plain("data", "train", "generate with scene plain")
             self._check_frames(config)
             self.per_view = [
                 GeneratedDropDataset(
@@ -119,6 +120,7 @@ class TrainingSamples(Dataset):
                     field="data.source",
                 )
             self.settings = read_manifest(root)["parsed_settings"]
+            self.settings.require_plain(str(root), "train", "make its data with --scene plain")
             self._check_frames(config)
             self.per_view = [
                 DropDataset(

@@ -103,6 +103,7 @@ def train_gaussian_predictor(
     """Run (or resume) the training described by ``settings``; returns the output folder."""
     out = Path(settings.out)
     dataset = DropDataset(settings.data, split=settings.split, frames=[0])
+    dataset.settings.require_plain(settings.data, "train-gs", "make its data with --scene plain")
     if len(dataset) == 0:
         raise InputError(f"no samples in split {settings.split!r}", source=settings.data)
     resolution = dataset.settings.resolution
