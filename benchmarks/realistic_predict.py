@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import platform
 import shutil
 import tempfile
@@ -37,14 +36,13 @@ from reconphys.data import DropDataset
 from reconphys.data.storage import video_name
 from reconphys.errors import InputError
 from reconphys.physics import ATTRIBUTE_RANGES
+from reconphys.pipeline.demo import true_observables
 
 CONFIGS = ("true_geometry", "camera_file", "mp4_only")
 
 
-def observables(a: dict) -> np.ndarray:
-    return np.array(
-        [math.log(a["stiffness"] / a["mass"]), math.log(a["damping"] / a["mass"]), a["friction"]]
-    )
+def observables(attributes: dict) -> np.ndarray:  # [3] log k/m, log d/m, friction
+    return np.array(list(true_observables(attributes).values()))
 
 
 def main() -> None:

@@ -35,9 +35,9 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from ..physics import GRAVITY
 from ..render.cameras import intrinsics_from_fov, look_at
 from .camera import CameraSpec
+from .placement import GRAVITY_MAGNITUDE
 
 DEFAULT_FOV_DEG = 45.0  # vertical: a phone's main camera in landscape is about 40–50°
 PITCH_PRIOR_DEG = 15.0  # filmed from a little above the drop
@@ -47,7 +47,6 @@ PITCH_PRIOR_SPREAD_DEG = 30.0
 MIN_FALL_FRAMES = 4  # frames of free fall (three intervals: an acceleration and its check)
 LANDED_PIXELS = 1.0  # the bottom within this of its lowest: the object has landed
 FALL_FIT_PX = 0.5  # a parabola fits a free fall's centroid to this (plus 2 % of the radius)
-GRAVITY_MAGNITUDE = -GRAVITY[2]
 
 
 @dataclass

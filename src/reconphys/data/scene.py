@@ -11,7 +11,7 @@ and sit 90° apart around the centre of the motion, as in the plain look.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
@@ -39,17 +39,8 @@ class SceneSpec:
     video_quality: float  # H.264 quality 0–10
     noise_seed: int
 
-    def to_dict(self) -> dict:
-        return {
-            "size": self.size,
-            "look": self.look.to_dict(),
-            "fov_deg": self.fov_deg,
-            "elevation_deg": self.elevation_deg,
-            "azimuth_deg": self.azimuth_deg,
-            "framing": self.framing,
-            "offset": list(self.offset),
-            "video_quality": self.video_quality,
-        }
+    def to_dict(self) -> dict:  # JSON-ready, without the noise seed
+        return {k: v for k, v in asdict(self).items() if k != "noise_seed"}
 
 
 def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> SceneSpec:

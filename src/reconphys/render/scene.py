@@ -15,7 +15,7 @@ higher they are; it is an appearance cue, not a physical light transport.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
@@ -47,20 +47,8 @@ class SceneLook:
     noise_sigma: float  # sensor noise, standard deviation in [0, 1] colour units
     texture_seed: int
 
-    def to_dict(self) -> dict:
-        return {
-            "ground_pattern": self.ground_pattern,
-            "ground_colors": [list(c) for c in self.ground_colors],
-            "ground_period": self.ground_period,
-            "ground_angle": self.ground_angle,
-            "horizon_color": list(self.horizon_color),
-            "zenith_color": list(self.zenith_color),
-            "band_contrast": self.band_contrast,
-            "light_direction": list(self.light_direction),
-            "ambient": self.ambient,
-            "noise_sigma": self.noise_sigma,
-            "texture_seed": self.texture_seed,
-        }
+    def to_dict(self) -> dict:  # JSON-ready (tuples are written as lists)
+        return asdict(self)
 
 
 def draw_look(rng: np.random.Generator, noise_range: tuple[float, float]) -> SceneLook:
