@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DEMO_OUT ?= demo_out
 
-.PHONY: install demo test lint bench model model-cnn gs-model masks-model clean
+.PHONY: install demo test lint bench model model-crop model-cnn gs-model masks-model clean
 
 install: $(VENV)/.installed
 
@@ -47,6 +47,21 @@ model: install
 	$(BIN)/reconphys train configs/track_pybullet.toml --no-progress
 	cp runs/track_pybullet/model.safetensors src/reconphys/weights/physics_predictor.safetensors
 	cp runs/track_pybullet/model.json src/reconphys/weights/physics_predictor.json
+
+# The shipped network of object crops, what predict reads any recording but the plain look with
+# (docs/training.md "Object-centric input"; ~1.5 h on 2 CPU cores after `make model`'s data/pyb):
+# realistic-look drops and tosses of the same training meshes (two seeds, 2 each), five track
+# networks of object crops, their ensemble copied into the package's weights.
+model-crop: install
+	$(BIN)/python -m pip install -q -e '.[meshes]'
+	$(BIN)/python benchmarks/held_out_meshes.py data/pyb data/pybullet_meshes
+	$(BIN)/reconphys make-data --config configs/data_real_pybullet.toml --workers 2 \
+	    --out data/real_pybullet
+	$(BIN)/reconphys make-data --config configs/data_real_pybullet.toml --seed 22 --workers 2 \
+	    --out data/real_pybullet2
+	$(BIN)/reconphys train configs/track_realistic.toml --no-progress
+	cp runs/track_realistic/model.safetensors src/reconphys/weights/physics_predictor_crop.safetensors
+	cp runs/track_realistic/model.json src/reconphys/weights/physics_predictor_crop.json
 
 # The CNN predictor shipped until 2026-11-25 (docs/training.md "Results"; ~75 min): the cpu_small
 # data, supervised pre-training on the observables, a mixed photometric fine-tune (runs/cpu_small_mixed).

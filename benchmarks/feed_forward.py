@@ -8,6 +8,11 @@ launch (drop / toss) and over all. No rendering or simulation: seconds for a dat
 
     python benchmarks/feed_forward.py data/pyb --model runs/trk_pyb runs/trk_big
 
+A realistic-look dataset (``make-data --scene realistic``) is read as ``predict`` reads a
+recording: its frames times the object's masks — the stored true masks (``--masks true``) or the
+shipped mask segmenter's (``--masks segmenter``, what a user without masks gets). Its test-only
+folders have no training split: ``--trivial-from DATA`` takes the medians of another dataset's.
+
 ``--curve PNG`` draws the ratios against each model's number of training videos (its model.json):
 a data curve, one panel per observable, drops and all (docs/images/track_data_curve.png).
 """
@@ -29,6 +34,7 @@ from reconphys.data.storage import read_manifest
 from reconphys.eval.plots import COLOURS, Axes
 from reconphys.models.shipped import load_predictor
 from reconphys.physics import ATTRIBUTES
+from reconphys.pipeline.samples import segment_frames
 from reconphys.pipeline.search import observables
 from reconphys.threads import set_cpu_threads
 
@@ -46,6 +52,24 @@ def main() -> None:
     parser.add_argument("--split", default="test")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--curve", type=Path, default=None, help="PNG: ratios vs training videos")
+    parser.add_argument(
+        "--masks",
+        choices=("true", "segmenter"),
+        default="true",
+        help="realistic datasets: the object's masks that cut it out",
+    )
+    parser.add_argument(
+        "--after-objects",
+        type=int,
+        default=0,
+        help="only the samples of the split's objects after its first N (a validation split)",
+    )
+    parser.add_argument(
+        "--trivial-from",
+        type=Path,
+        default=None,
+        help="the medians of this dataset's training split (default: DATA's)",
+    )
     args = parser.parse_args()
     set_cpu_threads(args.threads)
     manifest = read_manifest(args.data)
@@ -55,17 +79,38 @@ def main() -> None:
         meta = json.loads((args.data / s["dir"] / "sample.json").read_text())
         launch = meta["initial_state"].get("launch", "drop")
         truth_of[s["id"]] = (observables_of(meta["attributes"]), launch)
+    source = args.trivial_from or args.data
+    if args.trivial_from is not None:
+        train = [s for s in read_manifest(source)["samples"] if s["split"] == "train"]
+        for s in train:
+            meta = json.loads((source / s["dir"] / "sample.json").read_text())
+            truth_of[s["id"]] = (observables_of(meta["attributes"]), None)
     median = torch.stack([truth_of[s["id"]][0] for s in train]).median(0).values
-    print(f"{args.data}: trivial = median of {len(train)} training samples")
+    print(f"{args.data}: trivial = median of {len(train)} training samples of {source}")
+    realistic = manifest["parsed_settings"].scene != "plain"
+    if realistic:
+        print(f"realistic look: frames × {args.masks} masks")
     curve = []  # (training videos, {launch: ratios [3]})
     for model in args.model:
         predictor = load_predictor(model)
         dataset = DropDataset(args.data, args.split, views=[predictor.view])
+        if args.after_objects:
+            first = set(
+                list(dict.fromkeys(s["object_dir"] for s in dataset.samples))[: args.after_objects]
+            )
+            dataset.samples = [s for s in dataset.samples if s["object_dir"] not in first]
         started = time.perf_counter()
         rows = []
         for index in range(len(dataset)):
             item = dataset[index]
-            out = predictor.predict(item["frames"][0][None])
+            frames = item["frames"][0]  # [T, H, W, 3]
+            if realistic:
+                if args.masks == "true":
+                    masks = dataset.masks(index)[0].float()
+                else:
+                    masks = segment_frames(frames)
+                frames = frames * masks[..., None]
+            out = predictor.predict(frames[None])
             predicted = observables_of({k: out[k][0] for k in ATTRIBUTES})
             true, launch = truth_of[item["id"]]
             rows.append((predicted, true, launch))

@@ -7,6 +7,9 @@ DATASET never tests on. Meshes at the top of pybullet_data (bunny, duck, …) ar
 folder is the whole package. `make model` runs it (docs/training.md "Track network and a data
 curve").
 
+``--test DATASET OUT``: only DATASET's test objects (their realistic-look drops: a test set held
+out by object for a model trained on the folder above; docs/training.md "Object-centric input").
+
 ``--others OUT``: the wheel's other meshes — robot links, toys, props (laikago, kuka, xarm,
 racecar, …; ``.obj``/``.stl`` outside ``random_urdfs``, collision hulls and the named meshes of
 the pybullet source left out) — flattened into OUT: a mesh folder none of the pybullet source's
@@ -27,14 +30,15 @@ from reconphys.data.sources import PybulletSource
 from reconphys.data.storage import read_manifest
 
 
-def training_meshes(dataset: Path, out: Path) -> None:
+def training_meshes(dataset: Path, out: Path, test: bool = False) -> None:
+    """Every pybullet mesh except DATASET's test objects into OUT (``test``: only those)."""
     manifest = read_manifest(dataset)
     held_out = {o["id"] for o in manifest["objects"] if o["split"] == "test"}
     source = PybulletSource()
     copied = skipped = 0
     for path in source.paths:
         relative = path.relative_to(source.root)
-        if relative.as_posix() in held_out or relative.parent == Path("."):
+        if (relative.as_posix() in held_out) != test or relative.parent == Path("."):
             skipped += 1
             continue
         target = out / relative.parent
@@ -42,7 +46,10 @@ def training_meshes(dataset: Path, out: Path) -> None:
             shutil.copytree(path.parent, target)
         copied += 1
     held = f"{len(held_out)} test objects of {dataset}"
-    print(f"{copied} meshes in {out}; left out {skipped} ({held} and top-level meshes)")
+    if test:
+        print(f"{copied} meshes in {out}: the {held}")
+    else:
+        print(f"{copied} meshes in {out}; left out {skipped} ({held} and top-level meshes)")
 
 
 def other_meshes(out: Path) -> None:
@@ -67,6 +74,7 @@ def other_meshes(out: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--others", action="store_true", help="the wheel's other meshes → OUT")
+    parser.add_argument("--test", action="store_true", help="DATASET's test objects only → OUT")
     parser.add_argument("paths", type=Path, nargs="+", help="DATASET OUT, or OUT with --others")
     args = parser.parse_args()
     if args.others:
@@ -76,7 +84,7 @@ def main() -> None:
     else:
         if len(args.paths) != 2:
             parser.error("expected DATASET OUT")
-        training_meshes(*args.paths)
+        training_meshes(*args.paths, test=args.test)
 
 
 if __name__ == "__main__":

@@ -184,6 +184,9 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
     assert read["camera"] == "estimated from the video"
     estimate = read["camera_estimate"]
     assert estimate["fall_frames"] >= 4 and estimate["fov_deg"] == 45.0
+    # not the plain look: the physics network of object crops reads it
+    assert summary["model"].endswith("physics_predictor_crop.safetensors")
+    assert "object crops" in summary["model_choice"]
     assert 0.3 < estimate["distance_m"] < 20 and estimate["camera_height_m"] > 0
     out2 = tmp_path / "asset2"
     command = ["predict", str(video), "--out", str(out2), "--camera", "dataset", *flags]

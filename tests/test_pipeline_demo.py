@@ -25,12 +25,16 @@ from reconphys.pipeline.demo import (
 runner = CliRunner()
 
 
-def test_the_default_example_ships_small_and_complete():
-    assert DEFAULT_EXAMPLE in example_names()
-    example = load_example(DEFAULT_EXAMPLE)
-    size = sum(p.stat().st_size for p in example.folder.iterdir())
-    assert size < 2_000_000  # the budget for shipped recordings
-    assert example.truth["launch"] in ("drop", "toss")
+def test_the_examples_ship_small_and_complete():
+    assert DEFAULT_EXAMPLE in example_names() and "duck_toss_scene" in example_names()
+    for name in example_names():
+        example = load_example(name)
+        size = sum(p.stat().st_size for p in example.folder.iterdir())
+        assert size < 2_000_000  # the budget for shipped recordings
+        assert example.truth["launch"] in ("drop", "toss")
+    # the realistic example is the default's toss in a scene: the same physics
+    scene = load_example("duck_toss_scene").truth
+    assert scene["attributes"] == load_example(DEFAULT_EXAMPLE).truth["attributes"]
 
 
 def test_unknown_or_incomplete_examples_are_refused(tmp_path):

@@ -81,6 +81,9 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
         assert (out / name).is_file(), name
     summary = json.loads((out / "prediction.json").read_text())
     assert summary["placement"] == "as-is" and summary["silhouette_iou_given"] > 0.5
+    # the plain look (object on black, a camera file): the shipped track network reads it
+    assert summary["model"].endswith("physics_predictor.safetensors")
+    assert "plain look" in summary["model_choice"]
     steps = ("decode", "gaussians", "physics_network", "asset_build", "search", "write", "preview")
     for step in steps:
         assert summary["timings_s"][step] >= 0

@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -23,7 +24,10 @@ from typer.testing import CliRunner
 
 from reconphys.cli import app
 from reconphys.data import make_dataset
+from reconphys.data.dataset import DropDataset
+from reconphys.data.storage import read_manifest
 from reconphys.errors import InputError
+from reconphys.models.model_input import object_crop
 from reconphys.models.shipped import load_predictor
 from reconphys.threads import set_cpu_threads
 from reconphys.train import trainer as trainer_module
@@ -384,3 +388,64 @@ def test_predicted_geometry_trains_on_the_3dgs_predictors_assets(folder, tmp_pat
     assert math.isfinite(record["photometric"]) and record["photometric"] > 0
     meta = json.loads((tmp_path / "out" / "model.json").read_text())
     assert meta["training"]["geometry"].startswith("predicted: the frozen 3DGS predictor")
+
+
+def test_object_crops_read_the_realistic_look_and_train(tmp_path):
+    """model.crop: each video is the square crop around the object (models/model_input.
+    object_crop) of its frames times its true masks, so a realistic-look dataset trains (the
+    object on black, outside the masks exactly black); without crops it is refused, and crops
+    are supervised only. The trained model predicts from a crop of any framing."""
+    realistic = ("data.generate.scene=realistic", "data.generate.resolution=32")
+    crop = ("objective.kind=supervised", "model.inputs=track", "model.crop=true")
+    with pytest.raises(InputError, match="realistic-look"):
+        TrainingSamples(tiny(tmp_path, *realistic).data)
+    with pytest.raises(InputError, match="supervised"):
+        tiny(tmp_path, *realistic, "model.crop=true")
+    config = tiny(tmp_path / "crop", *realistic, *crop, "model.track_channels=8", "train.steps=2")
+    samples = TrainingSamples(config.data, assets=False, crop=True)
+    item = samples[0]
+    assert item["frames"].shape == (1, 4, 16, 16, 3)
+    generated = samples.per_view[0]
+    frames = generated[0]["frames"][0] * generated.masks(0)[0, ..., None]
+    assert torch.allclose(item["frames"], object_crop(frames, 16))
+    assert float(generated[0]["frames"][0].amin(-1).mean()) > 0.1  # the scene is not black
+    outside = object_crop(generated.masks(0)[0, ..., None].float().expand(-1, -1, -1, 3), 16)
+    assert float(item["frames"][outside == 0].abs().max()) == 0.0  # outside the masks: black
+    train(config, progress=False, log=lambda line: None)
+    predictor = load_predictor(tmp_path / "crop")
+    assert predictor.model.config.crop
+    out = predictor.predict(torch.nn.functional.pad(frames, (0, 0, 0, 20, 10, 0))[None])
+    assert torch.isfinite(out["unit"]).all()
+
+
+def test_more_sources_add_the_same_objects_drops_from_other_seeds(folder, tmp_path):
+    """data.more_sources: a folder made with the same settings but another seed adds its samples
+    of the objects data.source (and data.objects) select — never others (a validation split
+    held out by object stays held out); a folder made otherwise is refused by name."""
+    settings = TrainingSamples(tiny(tmp_path).data).settings
+    other = tmp_path / "other"
+    make_dataset(
+        replace(settings, seed=settings.seed + 1, objects=6), other, workers=1, device="cpu"
+    )
+    first = TrainingSamples(tiny(tmp_path, f"data.source={folder}", "data.objects=1").data)
+    both = TrainingSamples(
+        tiny(
+            tmp_path, f"data.source={folder}", "data.objects=1", f"data.more_sources=['{other}']"
+        ).data
+    )
+    objects = {s["object"] for s in first.dataset.samples}
+    theirs = [s for s in read_manifest(other)["samples"] if s["split"] == "train"]
+    added = [s for s in theirs if s["object"] in objects]
+    assert 0 < len(added) < len(theirs)  # the other seed's split has the object, and more
+    assert len(both) == len(first) + len(added)
+    assert {s["object"] for s in both.dataset.samples} == objects
+    ids = [both.sample_id(i) for i in range(len(both))]
+    assert len(set(ids)) == len(ids)
+    stored = DropDataset(other, "train", views=[0], frames=range(4), resolution=16)
+    assert torch.equal(both[len(first)]["frames"], stored[theirs.index(added[0])]["frames"])
+    bigger = tmp_path / "bigger"
+    make_dataset(replace(settings, resolution=20), bigger, workers=1, device="cpu")
+    with pytest.raises(InputError, match="resolution"):
+        TrainingSamples(
+            tiny(tmp_path, f"data.source={folder}", f"data.more_sources=['{bigger}']").data
+        )

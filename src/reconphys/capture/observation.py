@@ -28,6 +28,7 @@ from .calibrate import estimate_camera
 from .camera import CameraSpec, default_camera, read_camera
 from .masks import (
     alpha_masks,
+    backdrop_colour,
     border_is_uniform,
     check_masks,
     read_background,
@@ -58,6 +59,13 @@ class Observation:
     recorded_fps: float | None = None  # the file's frame rate (None: not stored / not a video)
     recorded_frames: int = 0  # frames before resampling
     camera_estimate: dict | None = None  # how the camera was read from the video (no file)
+    black_backdrop: bool = False  # the object on black, as the plain look of our data
+
+    @property
+    def plain_look(self) -> bool:
+        """The object on a black backdrop and a camera that was given, not estimated: what the
+        plain look of our data shows (models/shipped.model_for_recording)."""
+        return self.black_backdrop and self.camera_estimate is None
 
     @property
     def num_frames(self) -> int:
@@ -81,7 +89,8 @@ def stored_observation(
     backdrop, or with ``masks`` from elsewhere (a realistic scene), checked as any recording's."""
     height, width = frames.shape[1:3]
     camera = CameraSpec(K.double(), world_to_cam.double(), width, height, 0.0, source)
-    if masks is None:  # the frames are already object-on-black
+    black = masks is None
+    if black:  # the frames are already object-on-black
         masks = subtract_background(frames)
         mask_source = "background subtraction (black backdrop)"
     else:
@@ -95,7 +104,11 @@ def stored_observation(
         source=source,
         mask_source=mask_source,
         recorded_frames=frames.shape[0],
+        black_backdrop=black,
     )
+
+
+BLACK_LEVEL = 0.05  # a border colour whose channels all stay below this is a black backdrop
 
 
 def _plausible(masks: Tensor, uniform_border: bool) -> bool:
@@ -142,6 +155,7 @@ def load_observation(
     else:
         picks = resample_indices(raw.shape[0], fps or recorded_fps or 1.0 / frame_dt, frame_dt)
     height, width = raw.shape[1:3]
+    black = False  # the object on a black backdrop (the plain look): read from the border below
     if masks is not None:
         all_masks = read_mask_folder(masks, raw.shape[0], height, width)
         mask_source = f"mask folder {masks}"
@@ -162,9 +176,11 @@ def load_observation(
     else:
         chosen = subtract_background(rgb)
         mask_source = "background subtraction (border colour)"
+        black = float(backdrop_colour(rgb).max()) <= BLACK_LEVEL
         if segment is not None and not _plausible(chosen, border_is_uniform(rgb)):
             chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
+            black = False
     check_masks(chosen, str(masks) if masks is not None else str(path))
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where the object rests
@@ -184,4 +200,5 @@ def load_observation(
         recorded_fps=recorded_fps,
         recorded_frames=recorded,
         camera_estimate=estimate,
+        black_backdrop=black,
     )

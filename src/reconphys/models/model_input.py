@@ -50,13 +50,78 @@ def predictor_frames(
     source = pixels @ (K.double() @ torch.linalg.inv(virtual)).T
     u, v = source[..., 0] / source[..., 2], source[..., 1] / source[..., 2]
     grid = torch.stack([2 * u / width - 1, 2 * v / height - 1], -1).float()  # align_corners=False
-    images = frames.permute(0, 3, 1, 2)
-    warped = F.grid_sample(
-        images,
-        grid.expand(frames.shape[0], -1, -1, -1),
+    return _resample(frames, grid, resolution)
+
+
+def _resample(
+    frames: Tensor,  # [T, H, W, 3]
+    grid: Tensor,  # [S, S, 2] where each sample reads the frames (grid_sample's [−1, 1] units)
+    resolution: int,
+) -> Tensor:  # [1, T, R, R, 3]
+    """The frames read bilinearly at ``grid`` (black outside), then area-averaged to
+    ``resolution``."""
+    sampled = F.grid_sample(
+        frames.permute(0, 3, 1, 2),
+        grid.to(frames.dtype).expand(frames.shape[0], -1, -1, -1),
         mode="bilinear",
         padding_mode="zeros",
         align_corners=False,
     )
-    warped = F.interpolate(warped, size=(resolution, resolution), mode="area")
-    return warped.permute(0, 2, 3, 1)[None].clamp(0, 1)
+    sampled = F.interpolate(sampled, size=(resolution, resolution), mode="area")
+    return sampled.permute(0, 2, 3, 1)[None].clamp(0, 1)
+
+
+# --- object-centric input -------------------------------------------------------------------
+
+CROP_MARGIN = 0.15  # the crop: the object's motion box grown by this share of its side, each way
+CROP_LEVEL = 0.5  # a pixel is in the motion box where the object covers this much of it
+
+
+def object_crop(
+    frames: Tensor,  # [T, H, W, 3] in [0, 1], the object on a black backdrop
+    resolution: int,  # the crop's side, pixels
+    margin: float = CROP_MARGIN,
+) -> Tensor:  # [1, T, R, R, 3]
+    """The clip cropped to the square around the object's motion box (every pixel that the
+    object covers in any frame, :data:`CROP_LEVEL`; grown by ``margin`` a side) and resampled to
+    ``resolution`` (bilinear at 4× then area-averaged; outside the frame is black).
+
+    The physics network then reads the same object-sized picture whatever the recording's
+    framing, field of view, distance or resolution: a centimetre of slide or squash is the same
+    share of the crop (docs/training.md "Object-centric input"). No camera is needed. An empty
+    clip (no object pixel) is resized whole."""
+    if frames.dim() != 4 or frames.shape[-1] != 3:
+        raise ValueError(f"frames: expected [T, H, W, 3], got {list(frames.shape)}")
+    from .physics_predictor import OBJECT_LEVEL
+
+    height, width = frames.shape[1:3]
+    covered = ((frames.amax(-1) / OBJECT_LEVEL).clamp(0, 1) >= CROP_LEVEL).any(0)  # [H, W]
+    if not bool(covered.any()):
+        return resize_frames(frames[None], resolution)
+    rows = covered.any(1).nonzero()[:, 0]
+    cols = covered.any(0).nonzero()[:, 0]
+    top, bottom = float(rows[0]), float(rows[-1]) + 1.0
+    left, right = float(cols[0]), float(cols[-1]) + 1.0
+    side = max(bottom - top, right - left) * (1.0 + 2.0 * margin)
+    size = resolution * SUPERSAMPLE
+    step = (torch.arange(size, dtype=torch.float64) + 0.5) / size - 0.5  # [S] in (−½, ½)
+    u = (left + right) / 2 + step * side  # pixel coordinates (0 = the left edge)
+    v = (top + bottom) / 2 + step * side
+    gy, gx = torch.meshgrid(2 * v / height - 1, 2 * u / width - 1, indexing="ij")
+    return _resample(frames, torch.stack([gx, gy], -1), resolution)  # align_corners=False
+
+
+def network_input(
+    frames: Tensor,  # [T, H, W, 3] in [0, 1], the object on a black backdrop
+    K: Tensor | None,  # [3, 3] the recording's intrinsics at (W, H); None: the dataset's
+    resolution: int,
+    crop: bool,  # the model reads the object's crop (PredictorConfig.crop)
+) -> Tensor:  # [1, T, R, R, 3]
+    """What a physics network reads of a recording: :func:`object_crop` for a network trained on
+    crops, else the frames as the dataset's camera would have framed them
+    (:func:`predictor_frames`)."""
+    if crop:
+        return object_crop(frames, resolution)
+    if K is None:
+        return resize_frames(frames[None], resolution)
+    return predictor_frames(frames, K, resolution)

@@ -48,6 +48,7 @@ class PredictorConfig:
     motion: bool = False  # feed the encoder each frame's change too (motion_channels; small_cnn)
     inputs: str = "video"  # "video": the CNN trunk (+ branches above); "track": TrackNetwork alone
     track_channels: int = 64  # inputs = "track": width of the track's temporal convolutions
+    crop: bool = False  # read the object's motion-box crop (model_input.object_crop), not the frame
 
     def to_dict(self) -> dict:
         return asdict(self)

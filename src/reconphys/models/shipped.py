@@ -37,6 +37,9 @@ FORMAT = "reconphys.physics_predictor"
 VERSION = 1
 ENV_VAR = "RECONPHYS_MODEL"
 SHIPPED_PATH = Path(__file__).resolve().parent.parent / "weights" / "physics_predictor.safetensors"
+# The shipped model of object crops (configs/track_realistic.toml): what predict reads a recording
+# with when it is not the plain look (the object on black, filmed with a known camera)
+SHIPPED_CROP_PATH = SHIPPED_PATH.with_name("physics_predictor_crop.safetensors")
 TRAINED_NAME = "model.safetensors"  # what `reconphys train` writes into its output folder
 HOW_TO_TRAIN = (
     "train one with `reconphys train configs/cpu_small.toml` (docs/training.md) and pass "
@@ -54,6 +57,21 @@ def default_model_path() -> Path:
     shipped weights (which may not exist: :func:`load_predictor` then says how to train one)."""
     value = os.environ.get(ENV_VAR, "").strip()
     return resolve_model_path(value) if value else SHIPPED_PATH
+
+
+def model_for_recording(plain_look: bool) -> tuple[Path, str]:
+    """The physics predictor for a recording when none is named → (path, why).
+
+    ``$RECONPHYS_MODEL`` when set; else the shipped silhouette-track network for the plain look
+    (the object on a black backdrop with a camera file: the data it was trained on, where it is
+    best), and the shipped network of object crops for anything else (a floor, a wall, a camera
+    read from the video: it reads the same object-sized picture whatever the framing;
+    docs/training.md "Object-centric input")."""
+    if os.environ.get(ENV_VAR, "").strip():
+        return default_model_path(), f"${ENV_VAR}"
+    if plain_look:
+        return SHIPPED_PATH, "the plain look (object on black, camera given): the track network"
+    return SHIPPED_CROP_PATH, "not the plain look: the network of object crops"
 
 
 def resolve_model_path(path: str | os.PathLike) -> Path:
@@ -127,7 +145,8 @@ class LoadedPredictor:
     @torch.no_grad()
     def predict(self, frames: Tensor) -> dict[str, Tensor]:
         """frames [B, T, H, W, 3] in [0, 1] of the model's view, T ≥ num_frames (the first
-        num_frames are read; any square size, resized to the model's) → {"unit" [B, 4],
+        num_frames are read; any square size, resized to the model's or, for a model of object
+        crops, cropped) → {"unit" [B, 4],
         "mass", "stiffness", "damping", "friction" [B]}."""
         if frames.dim() != 5 or frames.shape[-1] != 3:
             raise InputError(f"expected frames [B, T, H, W, 3], got {list(frames.shape)}")
@@ -137,7 +156,12 @@ class LoadedPredictor:
                 source=str(self.path),
             )
         frames = frames[:, : self.num_frames].to(self.device, torch.float32)
-        return self.model(resize_frames(frames, self.model.config.resolution))
+        config = self.model.config
+        if config.crop:  # each video cropped around its object (model_input.object_crop)
+            from .model_input import object_crop
+
+            return self.model(torch.cat([object_crop(f, config.resolution) for f in frames]))
+        return self.model(resize_frames(frames, config.resolution))
 
 
 def _read_metadata(path: Path) -> dict:

@@ -32,7 +32,7 @@ from ..assets.build import lifted_above
 from ..capture import Observation
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
-from ..models.model_input import predictor_frames
+from ..models.model_input import network_input
 from ..models.reconstruct import initial_velocity, observed_asset, predicted_gaussians
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
@@ -168,7 +168,7 @@ def predict(
     Turns on ``torch.set_flush_denormal`` (as the CLI does): settling objects and far Gaussian
     tails otherwise produce float32 denormals that slow CPUs down several times.
     """
-    from ..models.shipped import load_predictor
+    from ..models.shipped import load_predictor, model_for_recording
 
     if geometry not in GEOMETRIES:
         raise InputError(f"expected auto or predicted, got {geometry!r}", field="--geometry")
@@ -201,6 +201,15 @@ def predict(
         sample=sample,
         view=predictor.view if view is None else view,
     )
+    timings["decode"] = time.perf_counter() - started
+    if model is None:  # the network for this recording's look (models/shipped.py)
+        chosen, why = model_for_recording(observation.plain_look)
+        if chosen != predictor.path:
+            started = time.perf_counter()
+            predictor = load_predictor(chosen, device=device)
+            timings["model_load"] += time.perf_counter() - started
+            details["model"] = str(predictor.path)
+        details["model_choice"] = why
     if observation.num_frames < predictor.num_frames:
         raise InputError(
             f"{observation.num_frames} frames at {observation.frame_dt} s after resampling; the "
@@ -208,7 +217,6 @@ def predict(
             " s of video)",
             source=observation.source,
         )
-    timings["decode"] = time.perf_counter() - started
     details["input"] = {
         "source": observation.source,
         "frames": observation.num_frames,
@@ -315,10 +323,12 @@ def predict_observation(
 
     started = time.perf_counter()
     with torch.no_grad():
-        frames = predictor_frames(
+        config = predictor.model.config
+        frames = network_input(
             observation.frames[: predictor.num_frames],
             observation.camera.K,
-            predictor.model.config.resolution,
+            config.resolution,
+            config.crop,
         )
         out = predictor.model(frames.to(predictor.device))
     attributes = {name: float(out[name][0]) for name in ATTRIBUTES}

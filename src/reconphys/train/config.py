@@ -57,6 +57,9 @@ class DataConfig:
     view: int = 0  # the input view, 0–3 (docs/design.md#conventions)
     all_views: bool = False  # train on every view, each its own video (4× the videos; not eval)
     objects: int = 0  # a folder only: the split's first N objects' samples (0: all; data curves)
+    # further folders made like data.source but with another seed: their samples of the same
+    # objects (those data.source and data.objects select) are read too — more drops of each
+    more_sources: tuple[str, ...] = ()
     cache: bool = False  # keep each decoded video in memory (uint8): later epochs read no files
     frames: int = 20  # the predictor reads frames 0..frames−1; the loss compares 1..frames−1
     resolution: int = 64  # predictor input, pixels (square; frames are resized to it)
@@ -268,6 +271,11 @@ def _validate(config: TrainConfig) -> None:
     )
     _require(d.objects >= 0, "data.objects", f"must be ≥ 0 (0: all), got {d.objects}")
     _require(
+        not d.more_sources or d.source != GENERATE,
+        "data.more_sources",
+        "for a folder only; generated data takes data.generate.samples_per_object",
+    )
+    _require(
         d.objects == 0 or d.source != GENERATE,
         "data.objects",
         "for a folder only; generated data takes data.generate.objects",
@@ -278,6 +286,11 @@ def _validate(config: TrainConfig) -> None:
         "the cache lives in the training process: set data.num_workers = 0",
     )
     _choice(m.inputs, INPUTS, "model.inputs")
+    _require(
+        not m.crop or o.kind == "supervised",
+        "model.crop",
+        "a model of object crops is trained supervised (its input is not the camera's view)",
+    )
     _require(m.track_channels >= 1, "model.track_channels", "must be ≥ 1")
     _choice(m.encoder, tuple(encoder_names()), "model.encoder")
     _require(

@@ -32,6 +32,7 @@ from ..data.sampling import draw_sample
 from ..data.settings import DataSettings, make_settings
 from ..data.storage import read_manifest
 from ..errors import InputError
+from ..models.model_input import object_crop
 from ..physics import ATTRIBUTES
 from .config import GENERATE, DataConfig
 
@@ -86,22 +87,66 @@ def generate_settings(config: DataConfig) -> DataSettings:
         raise InputError(str(e), field="data.generate") from None
 
 
+# settings in which data.more_sources may differ from data.source (what else differs would change
+# what a video shows)
+FREE_KEYS = ("seed", "objects", "test_objects", "samples_per_object", "test_samples_per_object")
+
+
+class Folders(Dataset):
+    """Several dataset folders' samples (each a :class:`DropDataset` of one view) read as one,
+    in order: ``data.source`` then ``data.more_sources``."""
+
+    def __init__(self, parts: list[DropDataset]):
+        self.parts = parts
+        self.samples = [s for part in parts for s in part.samples]
+        self._where = [(k, i) for k, part in enumerate(parts) for i in range(len(part))]
+
+    def __len__(self) -> int:
+        return len(self._where)
+
+    def __getitem__(self, index: int) -> dict:
+        part, index = self._where[index]
+        return self.parts[part][index]
+
+    def sample_id(self, index: int) -> str:
+        """The sample's id; from data.more_sources[K − 1]: ``source{K}/`` before it (two seeds
+        may give a sample the same id)."""
+        part, inner = self._where[index]
+        name = self.parts[part].samples[inner]["id"]
+        return f"source{part}/{name}" if part else name
+
+    def masks(self, index: int) -> Tensor:
+        part, index = self._where[index]
+        return self.parts[part].masks(index)
+
+    def asset(self, index: int) -> Asset:
+        part, index = self._where[index]
+        return self.parts[part].asset(index)
+
+
 class TrainingSamples(Dataset):
     """Items ``{frames [1, T, H, W, 3], K [1, 3, 3], world_to_cam [1, 4, 4], attributes [4],
     id, asset}`` of one view, frames 0..T−1, at the loss' render resolution.
 
     With ``config.all_views`` every view of a sample is its own item (item ``i`` = sample
     ``i // 4``, view ``i % 4``): four videos of the same drop from four azimuths. With
-    ``assets=False`` the asset is None (the supervised objective simulates nothing)."""
+    ``assets=False`` the asset is None (the supervised objective simulates nothing).
 
-    def __init__(self, config: DataConfig, assets: bool = True):
+    With ``crop`` (a model of object crops, ``PredictorConfig.crop``; supervised only) the frames
+    are the object's crop at ``config.resolution`` (``models.model_input.object_crop``) of the
+    stored frames, and a realistic-look dataset is read too: its frames times its true masks (the
+    object on black, as ``predict`` masks a recording)."""
+
+    def __init__(self, config: DataConfig, assets: bool = True, crop: bool = False):
         split = None if config.split == "all" else config.split
         frames = range(config.frames)
-        resolution = config.loss_resolution
+        self.crop = config.resolution if crop else 0
+        resolution = None if crop else config.loss_resolution
         self.views = [0, 1, 2, 3] if config.all_views else [config.view]
         if config.source == GENERATE:
             self.settings = generate_settings(config)
-            self.settings.require_plain("data", "train", "generate with scene plain")
+            if not crop:
+                self.settings.require_plain("data", "train", "generate with scene plain")
             self._check_frames(config)
             self.per_view = [
                 GeneratedDropDataset(
@@ -120,7 +165,10 @@ class TrainingSamples(Dataset):
                     field="data.source",
                 )
             self.settings = read_manifest(root)["parsed_settings"]
-            self.settings.require_plain(str(root), "train", "make its data with --scene plain")
+            if not crop:
+                self.settings.require_plain(
+                    str(root), "train", "make its data with --scene plain, or train crops"
+                )
             self._check_frames(config)
             self.per_view = [
                 DropDataset(
@@ -134,6 +182,12 @@ class TrainingSamples(Dataset):
                 for v in self.views
             ]
             self.source = str(root.resolve())
+            if config.more_sources:
+                self.per_view = [
+                    Folders([dataset, *self._more(config, dataset, v, resolution)])
+                    for v, dataset in zip(self.views, self.per_view, strict=True)
+                ]
+                self.source = ",".join([self.source, *map(str, config.more_sources)])
         self.dataset = self.per_view[0]  # samples, assets and attributes (the same in every view)
         if len(self.dataset) == 0:
             raise InputError(f"no samples in split {config.split!r}", field="data.split")
@@ -148,6 +202,26 @@ class TrainingSamples(Dataset):
             self.geometry = PREDICTED_GEOMETRY.format(gs_model=self.gs_predictor.path)
             self._asset_attributes = self.medians()  # replaced by the objective's
         self._predicted_assets: dict[int, Asset] = {}  # item index → asset (deterministic)
+
+    def _more(self, config: DataConfig, first: DropDataset, view: int, resolution):
+        """data.more_sources' samples of ``first``'s objects (view ``view``)."""
+        objects = {s["object"] for s in first.samples}
+        same = {k: v for k, v in self.settings.to_dict().items() if k not in FREE_KEYS}
+        for folder in config.more_sources:
+            dataset = DropDataset(
+                folder, first.split, views=[view], frames=first.frame_index, resolution=resolution
+            )
+            theirs = {k: v for k, v in dataset.settings.to_dict().items() if k not in FREE_KEYS}
+            if theirs != same:
+                differ = sorted(k for k in same if theirs.get(k) != same[k])
+                raise InputError(
+                    f"made with other settings than data.source ({', '.join(differ)}): only "
+                    "the seed and the counts of objects and samples may differ",
+                    source=folder,
+                    field="data.more_sources",
+                )
+            dataset.samples = [s for s in dataset.samples if s["object"] in objects]
+            yield dataset
 
     def _check_frames(self, config: DataConfig) -> None:
         if config.frames > self.settings.num_frames:
@@ -166,14 +240,16 @@ class TrainingSamples(Dataset):
         return self._sample_id(index) + suffix
 
     def _sample_id(self, index: int) -> str:
-        if isinstance(self.dataset, DropDataset):
+        if isinstance(self.dataset, Folders):
+            return self.dataset.sample_id(index)
+        if not isinstance(self.dataset, GeneratedDropDataset):
             return self.dataset.samples[index]["id"]
         return self.dataset.samples[index].id
 
     def asset(self, index: int) -> Asset:
         """The sample's placed object with its true attributes and initial velocity."""
         index //= len(self.views)
-        if isinstance(self.dataset, DropDataset):
+        if not isinstance(self.dataset, GeneratedDropDataset):
             return self.dataset.asset(index)
         planned = self.dataset.samples[index]
         obj = self.dataset.object(index)
@@ -208,7 +284,13 @@ class TrainingSamples(Dataset):
             if item["frames"].dtype == torch.uint8:
                 item["frames"] = item["frames"].float() / 255
             return item
-        item = self.per_view[index % len(self.views)][index // len(self.views)]
+        dataset, sample = self.per_view[index % len(self.views)], index // len(self.views)
+        item = dataset[sample]
+        if self.crop:
+            frames = item["frames"][0]  # [T, H, W, 3]
+            if self.settings.scene != "plain":  # the object on black, as predict masks it
+                frames = frames * dataset.masks(sample)[0, ..., None].to(frames)
+            item = {**item, "frames": object_crop(frames, self.crop)}
         if self.cache is not None:
             kept = {k: item[k] for k in ("frames", "K", "world_to_cam", "attributes")}
             quantised = (item["frames"] * 255).round().to(torch.uint8)
@@ -236,7 +318,7 @@ class TrainingSamples(Dataset):
 
     def true_attributes(self) -> list[dict[str, float]]:
         """The attributes of every sample (no simulation, no image I/O)."""
-        if isinstance(self.dataset, DropDataset):
+        if not isinstance(self.dataset, GeneratedDropDataset):
             return [dict(s["attributes"]) for s in self.dataset.samples]
         out = []
         for planned in self.dataset.samples:

@@ -185,7 +185,9 @@ class Trainer:
             set_cpu_threads(self.config.train.threads)
         torch.set_flush_denormal(True)  # settling objects make float32 denormals (slow on CPU)
         supervised = self.config.objective.kind == "supervised"  # no rollout: no assets to build
-        self.data = TrainingSamples(self.config.data, assets=not supervised)
+        self.data = TrainingSamples(
+            self.config.data, assets=not supervised, crop=self.config.model.crop
+        )
         self.init = self._load_init(self.config.train.init) if self.config.train.init else None
 
     def _build(self) -> None:
