@@ -84,6 +84,7 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     # the plain look (object on black, a camera file): the shipped track network reads it
     assert summary["model"].endswith("physics_predictor.safetensors")
     assert "plain look" in summary["model_choice"]
+    assert "physics network: " in result.output and "(the plain look" in result.output
     steps = ("decode", "gaussians", "physics_network", "asset_build", "search", "write", "preview")
     for step in steps:
         assert summary["timings_s"][step] >= 0

@@ -136,6 +136,8 @@ def predict_command(
         f"{attributes['friction']:.2f} ({summary['anchors']} anchors, {summary['gaussians']} "
         f"Gaussians; geometry: {summary['geometry']})"
     )
+    if "model_choice" in summary:
+        typer.echo(f"physics network: {summary['model']} ({summary['model_choice']})")
     intervals = summary["intervals"]
     if intervals:
         s = summary["search"]
