@@ -174,9 +174,10 @@ def load_observation(
         chosen = subtract_background(rgb, read_background(background, height, width))
         mask_source = f"background subtraction (clean plate {background})"
     else:
-        chosen = subtract_background(rgb)
+        colour = backdrop_colour(rgb)
+        chosen = subtract_background(rgb, colour)
         mask_source = "background subtraction (border colour)"
-        black = float(backdrop_colour(rgb).max()) <= BLACK_LEVEL
+        black = float(colour.max()) <= BLACK_LEVEL
         if segment is not None and not _plausible(chosen, border_is_uniform(rgb)):
             chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"

@@ -16,7 +16,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from ..render.cameras import intrinsics_from_fov
-from .physics_predictor import resize_frames
+from .physics_predictor import OBJECT_LEVEL, resize_frames
 
 DATASET_FOV_DEG = 40.0  # the dataset cameras' vertical field of view (docs/design.md#conventions)
 SUPERSAMPLE = 4  # the virtual image is sampled at 4× the network's size, then area-averaged
@@ -92,8 +92,6 @@ def object_crop(
     clip (no object pixel) is resized whole."""
     if frames.dim() != 4 or frames.shape[-1] != 3:
         raise ValueError(f"frames: expected [T, H, W, 3], got {list(frames.shape)}")
-    from .physics_predictor import OBJECT_LEVEL
-
     height, width = frames.shape[1:3]
     covered = ((frames.amax(-1) / OBJECT_LEVEL).clamp(0, 1) >= CROP_LEVEL).any(0)  # [H, W]
     if not bool(covered.any()):

@@ -25,6 +25,7 @@ from torch import Tensor
 from ..errors import InputError
 from ..io import atomic_file, read_json
 from ..physics.model import ATTRIBUTE_RANGES, ATTRIBUTES
+from .model_input import object_crop
 from .physics_predictor import (
     LOG_SCALED,
     PhysicsPredictor,
@@ -158,8 +159,6 @@ class LoadedPredictor:
         frames = frames[:, : self.num_frames].to(self.device, torch.float32)
         config = self.model.config
         if config.crop:  # each video cropped around its object (model_input.object_crop)
-            from .model_input import object_crop
-
             return self.model(torch.cat([object_crop(f, config.resolution) for f in frames]))
         return self.model(resize_frames(frames, config.resolution))
 
