@@ -4,13 +4,16 @@ gradients, pruning, and its training (loss goes down, exact resume)."""
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 import torch
 from helpers import make_tiny_dataset
 
+from reconphys.assets.gaussians import SH_C0, Gaussians
 from reconphys.capture import default_camera
 from reconphys.capture.placement import project
+from reconphys.errors import InputError
 from reconphys.geometry import quaternion_multiply
 from reconphys.models.gaussian_predictor import (
     GaussianPredictor,
@@ -18,6 +21,8 @@ from reconphys.models.gaussian_predictor import (
     prune_gaussians,
 )
 from reconphys.models.gaussian_shipped import load_gaussian_predictor
+from reconphys.models.model_input import frame_crop
+from reconphys.render import Cameras, render
 from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
 
 
@@ -161,3 +166,124 @@ def test_training_lowers_the_loss_and_resumes_exactly(dataset, tmp_path):
         train_gaussian_predictor(
             _settings(dataset, tmp_path / "b", lr=1e-3), progress=False, log=lambda s: None
         )
+
+
+# --- the object-centric (crop) predictor ---------------------------------------------------
+
+
+def blob(count: int = 200, seed: int = 0) -> Gaussians:
+    """A coloured ellipsoidal cloud of small Gaussians, 0.3 m across, 0.5 m above the origin."""
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(count, 3, generator=g) * torch.tensor([0.08, 0.05, 0.06])
+    return Gaussians(
+        means=means + torch.tensor([0.0, 0.0, 0.5]),
+        quats=torch.tensor([1.0, 0.0, 0.0, 0.0]).expand(count, 4).clone(),
+        log_scales=torch.full((count, 3), math.log(0.02)),
+        opacity_logits=torch.full((count,), 3.0),
+        sh0=(torch.rand(count, 3, generator=g) - 0.5) / SH_C0,
+    )
+
+
+def centroid(alpha: torch.Tensor) -> torch.Tensor:  # [H, W] → (u, v) pixels
+    v, u = torch.meshgrid(
+        torch.arange(alpha.shape[0]) + 0.5, torch.arange(alpha.shape[1]) + 0.5, indexing="ij"
+    )
+    return torch.stack([(alpha * u).sum(), (alpha * v).sum()]) / alpha.sum()
+
+
+def test_a_frame_crop_is_the_pinhole_image_of_its_intrinsics():
+    """The object cropped out of a 256-px render and resampled to 32 px is the render at the
+    crop's intrinsics (crop_intrinsics): colours to ~1 %, the silhouette's centroid to a third of a
+    pixel (the crop cuts the faint rim outside the mask; a principal point 2 px off is 2 px off)."""
+    big = default_camera(256, 256, view=1)
+    gaussians = blob()
+    with torch.no_grad():
+        out = render(
+            gaussians, Cameras(big.K[None].float(), big.world_to_cam[None].float(), 256, 256)
+        )
+    image, alpha = out.rgb[0], out.alpha[0].reshape(256, 256)
+    crop, crop_mask, K = frame_crop(image, (alpha > 0.5).float(), big.K.float(), 32)
+    assert 0.1 < float(crop_mask.mean()) < 0.8  # the object fills the crop, with a margin
+    soft, _, _ = frame_crop(
+        alpha[..., None].expand(-1, -1, 3), (alpha > 0.5).float(), big.K.float(), 32
+    )
+    with torch.no_grad():
+        direct = render(gaussians, Cameras(K[None], big.world_to_cam[None].float(), 32, 32))
+    assert float((direct.rgb[0] * crop_mask[..., None] - crop).abs().mean()) < 0.02
+    direct_alpha = direct.alpha[0].reshape(32, 32)
+    assert float((centroid(direct_alpha) - centroid(soft[..., 0])).abs().max()) < 0.35
+    shifted = K.clone()
+    shifted[0, 2] += 2.0
+    with torch.no_grad():
+        moved = render(gaussians, Cameras(shifted[None], big.world_to_cam[None].float(), 32, 32))
+    moved_alpha = moved.alpha[0].reshape(32, 32)
+    assert abs(float(centroid(moved_alpha)[0] - centroid(soft[..., 0])[0]) - 2.0) < 0.35
+
+
+def test_a_crop_model_places_relative_to_the_reference_depth():
+    """A crop model with a zero head puts every Gaussian on its pixel's ray at the reference
+    depth, with its pixel's colour; twice the depth (the same crop) gives twice the distance and
+    twice the sizes: one network for every object size and distance."""
+    config = GaussianPredictorConfig(resolution=16, channels=[8, 16], crop=True)
+    model = GaussianPredictor(config)
+    with torch.no_grad():
+        model.unet.head.weight.zero_()
+        model.unet.head.bias.zero_()
+        model.unet.head.bias[7] = 1.0
+    camera = default_camera(16, 16, view=0)
+    inputs = (
+        torch.rand(1, 16, 16, 3),
+        torch.ones(1, 16, 16),
+        camera.K[None].float(),
+        camera.world_to_cam[None].float(),
+    )
+    with pytest.raises(ValueError, match="reference_depth"):
+        model(*inputs)
+    near = model(*inputs, torch.tensor([1.5])).map(lambda t: t[0])
+    far = model(*inputs, torch.tensor([3.0])).map(lambda t: t[0])
+    uv, depth = project(near.means.double(), camera)
+    centres = torch.arange(16, dtype=torch.float64) + 0.5
+    v, u = torch.meshgrid(centres, centres, indexing="ij")
+    assert torch.allclose(uv, torch.stack([u, v], -1).reshape(-1, 2), atol=1e-3)
+    assert torch.allclose(depth, torch.full_like(depth, 1.5), atol=1e-4)
+    eye = -camera.world_to_cam[:3, :3].T.double() @ camera.world_to_cam[:3, 3].double()
+    ratio = (far.means.double() - eye).norm(dim=-1) / (near.means.double() - eye).norm(dim=-1)
+    assert torch.allclose(ratio, torch.full_like(ratio, 2.0), atol=1e-4)
+    assert torch.allclose(
+        far.log_scales - near.log_scales, torch.full_like(near.log_scales, math.log(2)), atol=1e-5
+    )
+    colours = near.sh0 * SH_C0 + 0.5  # the input pixels' own colours (no correction yet)
+    assert torch.allclose(colours, inputs[0].reshape(-1, 3).clamp(0.01, 0.99), atol=1e-5)
+
+
+def test_a_crop_model_trains_on_the_realistic_look(tmp_path):
+    """train-gs refuses a realistic-look dataset for a whole-frame model and trains a crop
+    model on it (frames masked by the stored true masks, every view cropped)."""
+    torch.set_num_threads(1)
+    data = make_tiny_dataset(
+        tmp_path / "real", objects=1, samples_per_object=1, test_objects=0, scene="realistic"
+    )
+    with pytest.raises(InputError, match="plain"):
+        train_gaussian_predictor(
+            _settings(data, tmp_path / "a"), progress=False, log=lambda s: None
+        )
+    settings = GaussianTrainSettings(
+        data=str(data),
+        out=str(tmp_path / "b"),
+        steps=3,
+        batch_size=1,
+        lr=3e-3,
+        predictor={
+            "channels": [8, 16],
+            "crop": True,
+            "resolution": 16,
+            "depth_range": 0.5,
+            "offset_range": 0.05,
+            "min_scale": 0.004,
+            "max_scale": 0.1,
+        },
+    )
+    out = train_gaussian_predictor(settings, progress=False, log=lambda s: None)
+    log = [json.loads(x) for x in (out / "log.jsonl").read_text().splitlines()]
+    assert all(math.isfinite(r["loss"]) for r in log)
+    assert load_gaussian_predictor(out).model.config.crop

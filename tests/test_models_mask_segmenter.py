@@ -187,6 +187,9 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
     # not the plain look: the physics network of object crops reads it
     assert summary["model"].endswith("physics_predictor_crop.safetensors")
     assert "object crops" in summary["model_choice"]
+    # and the object-centric 3DGS predictor its geometry (hundreds of Gaussians, not a dozen)
+    assert "gaussian_predictor_crop" in summary["geometry"]
+    assert "object-centric" in summary["gs_model_choice"] and summary["gaussians"] >= 100
     assert 0.3 < estimate["distance_m"] < 20 and estimate["camera_height_m"] > 0
     out2 = tmp_path / "asset2"
     command = ["predict", str(video), "--out", str(out2), "--camera", "dataset", *flags]

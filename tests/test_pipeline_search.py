@@ -20,6 +20,7 @@ from reconphys.physics import scene_stable_substeps, stable_substeps
 from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.pipeline.samples import load_sample
 from reconphys.pipeline.search import (
+    PREDICTED_GEOMETRY_TEMPERATURE,
     attributes_of,
     lighting_gain,
     observable_bounds,
@@ -84,6 +85,20 @@ def test_search_walks_back_to_the_true_observables(sample):
     assert after_error[0] < 0.25 * before_error[0], (true, start, after)  # log k/m
     assert after_error[2] < 0.5 * before_error[2], (true, start, after)  # friction
     assert after_error.sum() < 0.5 * before_error.sum()
+
+
+def test_a_wider_temperature_widens_every_interval(sample):
+    """temperature_scale (predict's 4× on the object-centric predictor's geometry) multiplies
+    the profile posterior's temperature: every 10–90 % interval is at least as wide, and the
+    sharpest one (log k/m of a slide seen whole) strictly wider."""
+    observation, truth = sample
+    widths = []
+    for scale in (1.0, PREDICTED_GEOMETRY_TEMPERATURE):
+        _, history = search(truth.asset, observation.frames[:20], observation.camera,
+                            temperature_scale=scale)  # fmt: skip
+        widths.append([high - low for low, high in history["intervals"].values()])
+    assert all(wide >= narrow - 1e-9 for narrow, wide in zip(*widths, strict=True)), widths
+    assert widths[1][0] > 1.2 * widths[0][0], widths
 
 
 def test_search_refuses_a_single_frame(sample):

@@ -125,19 +125,72 @@ def _world_to_cam(pitch: float, height: float) -> Tensor:
     return look_at(eye, eye + forward)
 
 
-def estimate_camera(
-    masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
-    frame_dt: float,  # seconds between frames
-    fov_deg: float | None = None,  # vertical; None: DEFAULT_FOV_DEG
-) -> CameraEstimate:
-    """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
+def _fit_fall(
+    track: _Track,
+    count: int,  # frames of free fall
+    frame_dt: float,
+    K: np.ndarray,  # [3, 3]
+    gravity: np.ndarray | None = None,  # [3] m/s² in the camera frame; None: pitch fitted
+):
+    """Least-squares fit of the free fall to the masks' centroid and growth (module doc, 1).
+    Returns ``(params, positions, rms_px)``: params = P0 [3], V0 [3] (camera frame, metres,
+    m/s) and the pitch (radians; the prior's where ``gravity`` is given), positions(params, t)
+    → [F, 3]."""
     from scipy.optimize import least_squares
 
-    fov = DEFAULT_FOV_DEG if fov_deg is None else float(fov_deg)
-    height_px, width_px = masks.shape[1:3]
-    K = intrinsics_from_fov(fov, width_px, height_px, dtype=torch.float64)
-    f, cx, cy = float(K[0, 0]), float(K[0, 2]), float(K[1, 2])
-    track = mask_track(masks)
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    times = np.arange(count) * frame_dt
+    uv = track.centroid[:count]
+    growth = np.sqrt(track.area[:count] / track.area[0])
+    radius_px = math.sqrt(track.area[0] / math.pi)
+    # start: a parabola through v(t) gives the acceleration in pixels → the depth
+    c2, c1, _ = np.polyfit(times, uv[:, 1], 2)
+    if not 2 * c2 > 0.2 * fy * GRAVITY_MAGNITUDE / 100.0:  # slower than g at 100 m: no fall seen
+        raise InputError(
+            "the object does not accelerate downwards in the first frames: the video does not "
+            "show a free fall to read the scale from; give the camera with --camera FILE",
+            source="camera from the video",
+        )
+    pitch0 = math.radians(PITCH_PRIOR_DEG)
+    down_v = math.cos(pitch0) if gravity is None else float(gravity[1]) / GRAVITY_MAGNITUDE
+    z0 = fy * GRAVITY_MAGNITUDE * max(down_v, 0.1) / max(2 * c2, 1e-6)
+    b1 = np.polyfit(times, uv[:, 0], 1)[0]
+    start = np.array(
+        [(uv[0, 0] - cx) / fx * z0, (uv[0, 1] - cy) / fy * z0, z0, b1 * z0 / fx, c1 * z0 / fy, 0.0]
+    )
+    free_pitch = gravity is None
+    if free_pitch:
+        start = np.append(start, pitch0)
+
+    def positions(params: np.ndarray, t: np.ndarray) -> np.ndarray:  # [F, 3] camera frame
+        p0, v0 = params[:3], params[3:6]
+        if free_pitch:
+            g = GRAVITY_MAGNITUDE * np.array([0.0, math.cos(params[6]), math.sin(params[6])])
+        else:
+            g = gravity
+        return p0 + v0 * t[:, None] + 0.5 * g * t[:, None] ** 2
+
+    def residual(params: np.ndarray) -> np.ndarray:
+        p = positions(params, times)
+        z = np.maximum(p[:, 2], 1e-3)
+        projected = np.stack([fx * p[:, 0] / z + cx, fy * p[:, 1] / z + cy], 1)
+        size = radius_px * (growth - p[0, 2] / z)
+        parts = [(projected - uv).ravel(), size]
+        if free_pitch:
+            parts.append([(params[6] - pitch0) / math.radians(PITCH_PRIOR_SPREAD_DEG)])
+        return np.concatenate(parts)
+
+    lower = [-np.inf, -np.inf, 1e-2, -np.inf, -np.inf, -np.inf]
+    upper = [np.inf] * 6
+    if free_pitch:
+        lower, upper = [*lower, math.radians(-10.0)], [*upper, math.radians(80.0)]
+    fit = least_squares(residual, start, bounds=(lower, upper), x_scale="jac")
+    params = fit.x if free_pitch else np.append(fit.x, pitch0)
+    rms = float(np.sqrt(np.mean(fit.fun[: 2 * count] ** 2)))
+    return params, positions, rms
+
+
+def _free_fall_frames(track: _Track, frame_dt: float) -> int:
     count = fall_frames(track, frame_dt)
     if count < MIN_FALL_FRAMES:
         raise InputError(
@@ -145,45 +198,39 @@ def estimate_camera(
             "video does not show the scale; give the camera with --camera FILE",
             source="camera from the video",
         )
-    times = np.arange(count) * frame_dt
-    uv = track.centroid[:count]
-    growth = np.sqrt(track.area[:count] / track.area[0])
-    radius_px = math.sqrt(track.area[0] / math.pi)
-    # start: a parabola through v(t) gives the acceleration in pixels → the depth
-    c2, c1, _ = np.polyfit(times, uv[:, 1], 2)
-    if not 2 * c2 > 0.2 * f * GRAVITY_MAGNITUDE / 100.0:  # slower than g at 100 m: no fall seen
-        raise InputError(
-            "the object does not accelerate downwards in the first frames: the video does not "
-            "show a free fall to read the scale from; give the camera with --camera FILE",
-            source="camera from the video",
-        )
-    pitch0 = math.radians(PITCH_PRIOR_DEG)
-    z0 = f * GRAVITY_MAGNITUDE * math.cos(pitch0) / max(2 * c2, 1e-6)
-    b1 = np.polyfit(times, uv[:, 0], 1)[0]
-    start = np.array(
-        [(uv[0, 0] - cx) / f * z0, (uv[0, 1] - cy) / f * z0, z0, b1 * z0 / f, c1 * z0 / f, 0.0]
-    )
-    start = np.append(start, pitch0)
+    return count
 
-    def positions(params: np.ndarray, t: np.ndarray) -> np.ndarray:  # [F, 3] camera frame
-        p0, v0, pitch = params[:3], params[3:6], params[6]
-        g = GRAVITY_MAGNITUDE * np.array([0.0, math.cos(pitch), math.sin(pitch)])
-        return p0 + v0 * t[:, None] + 0.5 * g * t[:, None] ** 2
 
-    def residual(params: np.ndarray) -> np.ndarray:
-        p = positions(params, times)
-        z = np.maximum(p[:, 2], 1e-3)
-        projected = np.stack([f * p[:, 0] / z + cx, f * p[:, 1] / z + cy], 1)
-        size = radius_px * (growth - p[0, 2] / z)
-        prior = (params[6] - pitch0) / math.radians(PITCH_PRIOR_SPREAD_DEG)
-        return np.concatenate([(projected - uv).ravel(), size, [prior]])
+def object_depth(
+    masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
+    frame_dt: float,  # seconds between frames
+    camera: CameraSpec,  # a known camera (file or estimate)
+) -> float:  # metres: the camera z of the object's centre in frame 0
+    """How far the object is, from its free fall seen by a known camera: gravity's direction in
+    the camera frame is the camera's, its size is known, so the fall's pixels give the depth
+    (module doc, 1, with the pitch known). InputError when the video shows no free fall."""
+    track = mask_track(masks)
+    count = _free_fall_frames(track, frame_dt)
+    rotation = camera.world_to_cam[:3, :3].double().numpy()
+    gravity = rotation @ np.array([0.0, 0.0, -GRAVITY_MAGNITUDE])
+    params, _, _ = _fit_fall(track, count, frame_dt, camera.K.double().numpy(), gravity)
+    return float(params[2])
 
-    lower = [-np.inf, -np.inf, 1e-2, -np.inf, -np.inf, -np.inf, math.radians(-10.0)]
-    upper = [np.inf, np.inf, np.inf, np.inf, np.inf, np.inf, math.radians(80.0)]
-    fit = least_squares(residual, start, bounds=(lower, upper), x_scale="jac")
-    params = fit.x
+
+def estimate_camera(
+    masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
+    frame_dt: float,  # seconds between frames
+    fov_deg: float | None = None,  # vertical; None: DEFAULT_FOV_DEG
+) -> CameraEstimate:
+    """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
+    fov = DEFAULT_FOV_DEG if fov_deg is None else float(fov_deg)
+    height_px, width_px = masks.shape[1:3]
+    K = intrinsics_from_fov(fov, width_px, height_px, dtype=torch.float64)
+    f, cx, cy = float(K[0, 0]), float(K[0, 2]), float(K[1, 2])
+    track = mask_track(masks)
+    count = _free_fall_frames(track, frame_dt)
+    params, positions, rms = _fit_fall(track, count, frame_dt, K.numpy())
     pitch = float(params[6])
-    rms = float(np.sqrt(np.mean(fit.fun[: 2 * count] ** 2)))
     # the ground: the object at rest (last frame) at the depth of its landing point
     landing = positions(params, np.array([count * frame_dt]))[0]
     depth = float(landing[2])

@@ -138,6 +138,8 @@ def predict_command(
     )
     if "model_choice" in summary:
         typer.echo(f"physics network: {summary['model']} ({summary['model_choice']})")
+    if "gs_model_choice" in summary:
+        typer.echo(f"3DGS predictor: {summary['gs_model_choice']}")
     intervals = summary["intervals"]
     if intervals:
         s = summary["search"]

@@ -38,6 +38,12 @@ class GaussianPredictorConfig:
     offset_range: float = 0.05  # metres
     min_scale: float = 0.002  # metres
     max_scale: float = 0.08  # metres
+    # object-centric (frame_crop's input): depth around a reference depth given per image (the
+    # object's centre), and depth_range, offset_range, min_scale and max_scale read as shares of
+    # the crop's width at that depth, so one network serves any object size and distance; the
+    # colour is the input pixel's plus a learned correction (logits)
+    crop: bool = False
+    crop_margin: float = 0.15  # frame_crop's margin
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -119,7 +125,10 @@ class GaussianPredictor(nn.Module):
         masks: Tensor,  # [B, R, R] in {0, 1}
         K: Tensor,  # [B, 3, 3] pixels at config.resolution
         world_to_cam: Tensor,  # [B, 4, 4]
+        reference_depth: Tensor | None = None,  # [B] metres (camera z of the object's centre)
     ) -> Gaussians:  # [B, R², ·] world frame
+        """Per pixel one Gaussian. ``reference_depth`` is required by a crop model (its depths
+        and sizes are relative to it) and ignored by the others (config.reference_depth)."""
         c = self.config
         batch, size = images.shape[0], images.shape[1]
         if size != c.resolution or images.shape[2] != c.resolution:
@@ -127,17 +136,30 @@ class GaussianPredictor(nn.Module):
         rays = pixel_rays(K.to(images.dtype), size)  # [B, R, R, 3]
         x = torch.cat([images, masks[..., None], rays], dim=-1).permute(0, 3, 1, 2)
         out = self.unet(x).permute(0, 2, 3, 1).reshape(batch, size * size, OUTPUT_CHANNELS)
-        depth = c.reference_depth + c.depth_range * torch.tanh(out[..., 0:1])
-        offset = c.offset_range * torch.tanh(out[..., 1:4])
+        if c.crop:
+            if reference_depth is None:
+                raise ValueError("a crop 3DGS predictor needs reference_depth (metres)")
+            centre = reference_depth.to(images.dtype).reshape(batch, 1, 1)
+            unit = centre * size / K[:, 0, 0].to(images.dtype).reshape(batch, 1, 1)  # crop width
+        else:
+            centre = torch.full((batch, 1, 1), c.reference_depth, dtype=images.dtype)
+            unit = torch.ones_like(centre)
+        depth = centre + c.depth_range * unit * torch.tanh(out[..., 0:1])
+        offset = c.offset_range * unit * torch.tanh(out[..., 1:4])
         points_cam = rays.reshape(batch, -1, 3) * depth + offset  # [B, R², 3]
         rotation = world_to_cam[:, :3, :3].to(images.dtype)
         translation = world_to_cam[:, :3, 3].to(images.dtype)
         means = (points_cam - translation[:, None]) @ rotation  # Rᵀ (x − t), row vectors
-        low, high = math.log(c.min_scale), math.log(c.max_scale)
+        low = math.log(c.min_scale) + torch.log(unit)
+        high = math.log(c.max_scale) + torch.log(unit)
         log_scales = low + (high - low) * torch.sigmoid(out[..., 4:7])
         # quaternions are in the camera frame: rotate them to the world frame (q_w = q_R⁻¹ ⊗ q)
         quats = _rotate_quaternions(F.normalize(out[..., 7:11], dim=-1), rotation)
-        rgb = torch.sigmoid(out[..., 12:15])
+        if c.crop:  # the pixel's own colour, corrected: the input view stays sharp
+            seen = images.reshape(batch, -1, 3).clamp(0.01, 0.99)
+            rgb = torch.sigmoid(torch.logit(seen) + out[..., 12:15])
+        else:
+            rgb = torch.sigmoid(out[..., 12:15])
         return Gaussians(
             means=means,
             quats=quats,

@@ -22,6 +22,8 @@ ENV_VAR = "RECONPHYS_GS_MODEL"
 SHIPPED_GS_PATH = (
     Path(__file__).resolve().parent.parent / "weights" / "gaussian_predictor.safetensors"
 )
+# the object-centric one (GaussianPredictorConfig.crop), trained on the realistic look
+SHIPPED_GS_CROP_PATH = SHIPPED_GS_PATH.with_name("gaussian_predictor_crop.safetensors")
 
 
 def default_gs_model_path() -> Path:
@@ -30,6 +32,18 @@ def default_gs_model_path() -> Path:
         return SHIPPED_GS_PATH
     path = Path(value)
     return path / TRAINED_NAME if path.is_dir() else path
+
+
+def gs_model_for_recording(plain_look: bool) -> tuple[Path, str]:
+    """The 3DGS predictor for a recording when none is named → (path, why):
+    ``$RECONPHYS_GS_MODEL`` when set; else the shipped whole-frame predictor for the plain look
+    (the object on black with a camera file: the data it was trained on), and the shipped
+    object-centric one for anything else (docs/usage.md "The 3DGS predictor")."""
+    if os.environ.get(ENV_VAR, "").strip():
+        return default_gs_model_path(), f"${ENV_VAR}"
+    if plain_look:
+        return SHIPPED_GS_PATH, "the plain look (object on black, camera given): whole frame"
+    return SHIPPED_GS_CROP_PATH, "not the plain look: the object-centric predictor"
 
 
 def save_gaussian_predictor(model: GaussianPredictor, path: str | os.PathLike, training: dict):

@@ -92,21 +92,78 @@ def object_crop(
     clip (no object pixel) is resized whole."""
     if frames.dim() != 4 or frames.shape[-1] != 3:
         raise ValueError(f"frames: expected [T, H, W, 3], got {list(frames.shape)}")
-    height, width = frames.shape[1:3]
     covered = ((frames.amax(-1) / OBJECT_LEVEL).clamp(0, 1) >= CROP_LEVEL).any(0)  # [H, W]
-    if not bool(covered.any()):
+    box = square_box(covered, margin)
+    if box is None:
         return resize_frames(frames[None], resolution)
+    return _resample(frames, _box_grid(box, resolution, *frames.shape[1:3]), resolution)
+
+
+def square_box(
+    covered: Tensor,  # [H, W] bool: the object's pixels
+    margin: float = CROP_MARGIN,
+) -> tuple[float, float, float] | None:  # (centre u, centre v, side), pixels; None: empty
+    """The square around the bounding box of ``covered``, grown by ``margin`` of its longer side
+    each way (pixel coordinates: 0 is the image's left/top edge)."""
+    if not bool(covered.any()):
+        return None
     rows = covered.any(1).nonzero()[:, 0]
     cols = covered.any(0).nonzero()[:, 0]
     top, bottom = float(rows[0]), float(rows[-1]) + 1.0
     left, right = float(cols[0]), float(cols[-1]) + 1.0
     side = max(bottom - top, right - left) * (1.0 + 2.0 * margin)
+    return (left + right) / 2, (top + bottom) / 2, side
+
+
+def _box_grid(box: tuple[float, float, float], resolution: int, height: int, width: int) -> Tensor:
+    """grid_sample's grid [S, S, 2] that reads the square ``box`` at SUPERSAMPLE × resolution."""
+    centre_u, centre_v, side = box
     size = resolution * SUPERSAMPLE
     step = (torch.arange(size, dtype=torch.float64) + 0.5) / size - 0.5  # [S] in (−½, ½)
-    u = (left + right) / 2 + step * side  # pixel coordinates (0 = the left edge)
-    v = (top + bottom) / 2 + step * side
+    u = centre_u + step * side  # pixel coordinates (0 = the left edge)
+    v = centre_v + step * side
     gy, gx = torch.meshgrid(2 * v / height - 1, 2 * u / width - 1, indexing="ij")
-    return _resample(frames, torch.stack([gx, gy], -1), resolution)  # align_corners=False
+    return torch.stack([gx, gy], -1)  # align_corners=False
+
+
+def crop_intrinsics(
+    K: Tensor,  # [3, 3] the image's intrinsics
+    box: tuple[float, float, float],  # square_box's (centre u, centre v, side), pixels
+    resolution: int,
+) -> Tensor:  # [3, 3] the crop's intrinsics at resolution × resolution
+    """A square crop of a pinhole image, resampled to ``resolution``, is a pinhole image: the same
+    pose, the focal lengths × resolution / side, the principal point moved to the crop's corner."""
+    centre_u, centre_v, side = box
+    scale = resolution / side
+    cropped = K.clone().double()
+    cropped[0, 0], cropped[1, 1] = K[0, 0] * scale, K[1, 1] * scale
+    cropped[0, 2] = (K[0, 2] - (centre_u - side / 2)) * scale
+    cropped[1, 2] = (K[1, 2] - (centre_v - side / 2)) * scale
+    return cropped.to(K.dtype)
+
+
+def frame_crop(
+    image: Tensor,  # [H, W, 3] in [0, 1]
+    mask: Tensor,  # [H, W] in {0, 1}: the object
+    K: Tensor,  # [3, 3] the image's intrinsics
+    resolution: int,
+    margin: float = CROP_MARGIN,
+) -> tuple[Tensor, Tensor, Tensor]:  # [R, R, 3] masked image, [R, R] mask, [3, 3] K
+    """One frame's object: the square around its mask's box (grown by ``margin``), the masked
+    image and the mask resampled to ``resolution`` (bilinear at 4× then area; a crop pixel is on
+    the object where the mask covers half of it), and the crop's intrinsics
+    (:func:`crop_intrinsics`). The 3DGS predictor's object-centric input."""
+    covered = mask > 0.5
+    box = square_box(covered, margin)
+    if box is None:
+        raise ValueError("the mask is empty: no object to crop")
+    height, width = mask.shape
+    stacked = torch.stack(
+        [image * covered[..., None], covered[..., None].to(image.dtype).expand_as(image)]
+    )  # [2, H, W, 3]
+    grid = _box_grid(box, resolution, height, width)
+    crops = _resample(stacked, grid, resolution)[0]  # [2, R, R, 3]
+    return crops[0], (crops[1, ..., 0] >= 0.5).to(image.dtype), crop_intrinsics(K, box, resolution)
 
 
 def network_input(

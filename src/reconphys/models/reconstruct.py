@@ -18,9 +18,10 @@ from ..assets.asset import Asset
 from ..assets.build import build_from_gaussians
 from ..assets.gaussians import Gaussians
 from ..capture import Observation
-from ..capture.placement import estimate_linear_velocity
+from ..capture.calibrate import object_depth
+from ..capture.placement import estimate_linear_velocity, ray
 from ..errors import InputError
-from .model_input import predictor_frames, virtual_intrinsics
+from .model_input import frame_crop, predictor_frames, virtual_intrinsics
 
 
 def initial_velocity(gaussians: Gaussians, observation: Observation) -> Tensor:  # [3] m/s
@@ -77,11 +78,45 @@ def feed_forward_asset(
     )
 
 
-def predicted_gaussians(observation: Observation, gs_model=None):
+def object_distance(observation: Observation) -> tuple[float, str]:
+    """How far the object is in frame 0 (metres, the camera z of its centre) and how that was
+    read: from its free fall (:func:`~reconphys.capture.calibrate.object_depth`), else from
+    where it rests on the camera's ground (the last frame's lowest object pixel). InputError
+    when neither is there (no fall seen and the resting object not on the ground)."""
+    try:
+        return object_depth(observation.masks, observation.frame_dt, observation.camera), "fall"
+    except InputError:
+        pass
+    last = observation.masks[-1] > 0.5
+    rows, cols = torch.nonzero(last, as_tuple=True)
+    if len(rows):
+        pixel = torch.tensor([float(cols.double().mean()) + 0.5, float(rows.max()) + 1.0])
+        centre, direction = ray(pixel.double(), observation.camera)
+        ground = observation.camera.ground_height
+        if float(direction[2]) < -1e-6 and float(centre[2]) > ground:
+            point = centre + direction * (ground - centre[2]) / direction[2]
+            w2c = observation.camera.world_to_cam.double()
+            depth = float((w2c[:3, :3] @ point + w2c[:3, 3])[2])
+            if depth > 0:
+                return depth, "rest on the ground"
+    raise InputError(
+        "cannot tell how far the object is (no free fall in the first frames and the resting "
+        "object is not on the camera's ground): give its geometry with --gaussians or --mesh",
+        source=observation.source,
+    )
+
+
+def predicted_gaussians(
+    observation: Observation,
+    gs_model=None,
+    distance: float | None = None,  # crop models: the object's distance, metres (None: read it)
+):
     """Frame 0 → the 3DGS predictor's Gaussians on the object's pixels (world frame), and the
-    model's path. ``gs_model``: a path, a loaded predictor, or None (the default one). The frame
-    and its mask are resampled to the dataset's intrinsics at the model's size (as the physics
-    network's input), so the camera's pose places them."""
+    model's path. ``gs_model``: a path, a loaded predictor, or None (the default one). A crop
+    model reads the object's crop of frame 0 (:func:`~reconphys.models.model_input.frame_crop`)
+    and the object's distance (:func:`object_distance`); the others read the frame and its mask
+    resampled to the dataset's intrinsics at the model's size (as the physics network's input),
+    so the camera's pose places them."""
     from .gaussian_predictor import prune_gaussians
     from .gaussian_shipped import LoadedGaussianPredictor, load_gaussian_predictor
 
@@ -89,20 +124,32 @@ def predicted_gaussians(observation: Observation, gs_model=None):
         loaded = gs_model
     else:
         loaded = load_gaussian_predictor(gs_model)
-    size = loaded.model.config.resolution
-    frame = predictor_frames(observation.frames[:1], observation.camera.K, size)[0, 0]
-    mask = (
-        predictor_frames(
+    config = loaded.model.config
+    size = config.resolution
+    w2c = observation.camera.world_to_cam.float()
+    if config.crop:
+        frame, mask, K = frame_crop(
+            observation.frames[0].float(),
+            observation.masks[0].float(),
+            observation.camera.K.float(),
+            size,
+            config.crop_margin,
+        )
+        if distance is None:
+            distance = object_distance(observation)[0]
+        depth = torch.tensor([float(distance)])
+    else:
+        frame = predictor_frames(observation.frames[:1], observation.camera.K, size)[0, 0]
+        mask = predictor_frames(
             observation.masks[:1, ..., None].expand(-1, -1, -1, 3), observation.camera.K, size
         )[0, 0, ..., 0]
-        > 0.5
-    )
-    K = virtual_intrinsics(size).float()
-    w2c = observation.camera.world_to_cam.float()
+        mask = (mask > 0.5).float()
+        K = virtual_intrinsics(size).float()
+        depth = None
     with torch.no_grad():
-        g = loaded.model(frame[None], mask[None].float(), K[None], w2c[None])
+        g = loaded.model(frame[None], mask[None], K[None], w2c[None], depth)
     try:
-        pruned = prune_gaussians(g.map(lambda t: t[0]), mask.reshape(-1).float())
+        pruned = prune_gaussians(g.map(lambda t: t[0]), mask.reshape(-1))
     except ValueError as e:
         raise InputError(str(e), source=observation.source) from None
     return pruned.map(lambda t: t.detach().float()), loaded.path

@@ -157,9 +157,11 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
         ]
     lines += [
         "",
-        f"Geometry: {prediction['geometry']}. It is the weak link on a real mesh (a grey blob, "
-        "docs/usage.md); give the object's PLY or mesh (`--gaussians`, `--mesh`) when you have "
-        "one.",
+        f"Geometry: {prediction['geometry']}"
+        + (f" ({prediction['gs_model_choice']})" if "gs_model_choice" in prediction else "")
+        + ". One view shows one side: the hidden sides are the predictor's guess (docs/usage.md "
+        '"The 3DGS predictor"); give the object\'s PLY or mesh (`--gaussians`, `--mesh`) when '
+        "you have one.",
         "",
         "## Next",
         "",

@@ -32,6 +32,11 @@ from ..assets.build import lifted_above
 from ..capture import Observation
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
+from ..models.gaussian_shipped import (
+    LoadedGaussianPredictor,
+    gs_model_for_recording,
+    load_gaussian_predictor,
+)
 from ..models.model_input import network_input
 from ..models.reconstruct import initial_velocity, observed_asset, predicted_gaussians
 from ..physics import ATTRIBUTES
@@ -278,6 +283,7 @@ def predict_observation(
     started = time.perf_counter()
     dataset_asset = None if truth is None else truth.asset
     build_new = True  # a new asset from given or predicted Gaussians (not the dataset's own)
+    object_centric = False  # the geometry is the object-centric 3DGS predictor's
     if gaussians is not None and mesh is not None:
         raise InputError("give either --gaussians or --mesh, not both", field="--mesh")
     given = gaussians if gaussians is not None else mesh
@@ -293,6 +299,12 @@ def predict_observation(
         details["initial_velocity"] = {"how": "the dataset sample's (ground truth)"}
         build_new = False
     else:
+        if gs_model is None:  # the 3DGS predictor for this recording's look
+            gs_model, why = gs_model_for_recording(observation.plain_look)
+            details["gs_model_choice"] = why
+        if not isinstance(gs_model, LoadedGaussianPredictor):
+            gs_model = load_gaussian_predictor(gs_model)
+        object_centric = gs_model.model.config.crop
         placed, gs_path = predicted_gaussians(observation, gs_model)
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
         object_id = f"predicted-{Path(observation.source).stem}"
@@ -355,16 +367,19 @@ def predict_observation(
 
     intervals = None
     if refine:
-        from .search import search
+        from .search import PREDICTED_GEOMETRY_TEMPERATURE, search
 
         started = time.perf_counter()
         count = predictor.num_frames
+        # the object-centric 3DGS predictor's geometry is not the object's: wider profiles
+        scale = PREDICTED_GEOMETRY_TEMPERATURE if object_centric else 1.0
         asset, history = search(
             asset,
             observation.frames[:count],
             observation.camera,
             resolution=refine_resolution,
             masks=observation.masks[:count],
+            temperature_scale=scale,
         )
         timings["search"] = time.perf_counter() - started
         intervals = history["intervals"]

@@ -6,6 +6,12 @@ into all four views, and the loss is the mean squared colour error plus ``silhou
 the mean squared error between the rendered alpha and the views' masks. The input view cycles
 through 0–3 so that every view is both input and target.
 
+A crop predictor (``predictor.crop = true``, docs/usage.md "The 3DGS predictor") reads the
+input view's object crop (:func:`~reconphys.models.model_input.frame_crop`) with the object's true
+centre depth, scattered by ``depth_noise`` (the depth ``predict`` reads from the fall is that far
+off), and is rendered into the four views' object crops; it trains on either look (the realistic
+look's frames masked by its stored true masks).
+
 The run writes ``OUT/model.safetensors`` + ``model.json`` (the predictor), ``OUT/log.jsonl`` (one
 line per step) and ``OUT/checkpoint.pt`` every ``checkpoint_every`` steps; running the same
 command again resumes from the checkpoint (same settings) and repeats the uninterrupted run.
@@ -21,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from ..capture.masks import subtract_background
 from ..data.dataset import DropDataset
 from ..errors import InputError
 from ..models.gaussian_predictor import GaussianPredictor, GaussianPredictorConfig
 from ..models.gaussian_shipped import save_gaussian_predictor
+from ..models.model_input import frame_crop
 from ..render import Cameras, render
 from .checkpoint import resume_step, save_step
 
@@ -49,31 +55,70 @@ class GaussianTrainSettings:
     silhouette_weight: float = 1.0  # weight of the alpha-vs-mask loss
     seed: int = 0  # initialisation and batch order
     checkpoint_every: int = 200  # steps between checkpoints
+    depth_noise: float = 0.1  # crop models: the reference depth × exp(N(0, σ²))
+    input_weight: float = 1.0  # the input view's loss weight (each other view's is 1)
     predictor: dict = field(default_factory=dict)  # GaussianPredictorConfig overrides
 
 
 def frame0_views(dataset: DropDataset, index: int) -> dict:
-    """Frame 0 of all views of a sample: images [V, R, R, 3], masks [V, R, R], K, world_to_cam."""
+    """Frame 0 of all views of a sample: images [V, R, R, 3] (the object on black), masks
+    [V, R, R], K, world_to_cam, and ``depth`` [V]: the camera z of the object's centre (its
+    anchors' mean), metres. Plain look: the masks by background subtraction (as ``predict``);
+    realistic look: the stored true masks, the frames masked by them."""
     item = dataset[index]
     images = item["frames"][:, 0].float()
+    if dataset.settings.scene == "plain":
+        masks = subtract_background(images)
+    else:
+        masks = dataset.masks(index)[:, 0].float()
+        images = images * masks[..., None]
+    w2c = item["world_to_cam"].float()
+    centre = item["anchors"][0].float().mean(0)  # [3] world, frame 0
     return {
         "images": images,
-        "masks": subtract_background(images),
+        "masks": masks,
         "K": item["K"].float(),
-        "world_to_cam": item["world_to_cam"].float(),
+        "world_to_cam": w2c,
+        "depth": (w2c[:, :3, :3] @ centre + w2c[:, :3, 3])[:, 2],
+    }
+
+
+def crop_views(views: dict, resolution: int, margin: float) -> dict:
+    """Every view's object crop (frame_crop): images, masks, K at ``resolution``; a view that
+    does not show the object (empty mask) is left out."""
+    shown = [v for v in range(len(views["masks"])) if bool((views["masks"][v] > 0.5).any())]
+    if not shown:
+        raise InputError("no view of the training sample shows the object")
+    crops = [
+        frame_crop(views["images"][v], views["masks"][v], views["K"][v], resolution, margin)
+        for v in shown
+    ]
+    return {
+        "images": torch.stack([c[0] for c in crops]),
+        "masks": torch.stack([c[1] for c in crops]),
+        "K": torch.stack([c[2] for c in crops]),
+        "world_to_cam": views["world_to_cam"][shown],
+        "depth": views["depth"][shown],
     }
 
 
 def sample_loss(
-    model: GaussianPredictor, views: dict, input_view: int, silhouette_weight: float
+    model: GaussianPredictor,
+    views: dict,
+    input_view: int,
+    silhouette_weight: float,
+    depth_scatter: float = 1.0,  # crop models: the reference depth × this
+    input_weight: float = 1.0,  # the input view's loss weight (each other view's is 1)
 ) -> tuple[torch.Tensor, dict]:
-    """Loss of one sample read from ``input_view`` and rendered into every view."""
-    v = input_view
+    """Loss of one sample read from ``input_view`` and rendered into every view (a crop model:
+    every view's object crop, ``views`` as :func:`crop_views` gives them)."""
+    v = input_view % len(views["images"])
     gaussians = model(
         views["images"][v : v + 1],
         views["masks"][v : v + 1],
         views["K"][v : v + 1],
         views["world_to_cam"][v : v + 1],
+        views["depth"][v : v + 1] * depth_scatter,
     )
     keep = views["masks"][v].reshape(-1) > 0.5
     if not bool(keep.any()):
@@ -82,10 +127,14 @@ def sample_loss(
     size = views["images"].shape[1]
     cameras = Cameras(views["K"], views["world_to_cam"], size, size)
     out = render(object_gaussians, cameras)
-    colour = F.mse_loss(out.rgb, views["images"])
-    silhouette = F.mse_loss(out.alpha.reshape(views["masks"].shape), views["masks"])
-    loss = colour + silhouette_weight * silhouette
-    return loss, {"colour": colour.item(), "silhouette": silhouette.item()}
+    weights = torch.ones(len(views["images"]))
+    weights[v] = input_weight
+    weights = weights / weights.sum()
+    colour = ((out.rgb - views["images"]) ** 2).mean((1, 2, 3))  # [V]
+    alpha = out.alpha.reshape(views["masks"].shape)
+    silhouette = ((alpha - views["masks"]) ** 2).mean((1, 2))  # [V]
+    loss = (weights * (colour + silhouette_weight * silhouette)).sum()
+    return loss, {"colour": colour.mean().item(), "silhouette": silhouette.mean().item()}
 
 
 def _lr(step: int, settings: GaussianTrainSettings) -> float:
@@ -103,7 +152,11 @@ def train_gaussian_predictor(
     """Run (or resume) the training described by ``settings``; returns the output folder."""
     out = Path(settings.out)
     dataset = DropDataset(settings.data, split=settings.split, frames=[0])
-    dataset.settings.require_plain(settings.data, "train-gs", "make its data with --scene plain")
+    crop = bool(settings.predictor.get("crop", False))
+    if not crop:
+        dataset.settings.require_plain(
+            settings.data, "train-gs", "make its data with --scene plain, or train a crop model"
+        )
     if len(dataset) == 0:
         raise InputError(f"no samples in split {settings.split!r}", source=settings.data)
     resolution = dataset.settings.resolution
@@ -139,9 +192,18 @@ def train_gaussian_predictor(
             group["lr"] = _lr(step, settings)
         optimizer.zero_grad()
         losses, parts = [], []
+        scatter = np.exp(settings.depth_noise * rng.standard_normal(len(picks)))
         for b, index in enumerate(picks):
+            views = frame0_views(dataset, int(index))
+            if crop:
+                views = crop_views(views, config.resolution, config.crop_margin)
             loss, part = sample_loss(
-                model, frame0_views(dataset, int(index)), (step + b) % 4, settings.silhouette_weight
+                model,
+                views,
+                (step + b) % 4,
+                settings.silhouette_weight,
+                float(scatter[b]),
+                settings.input_weight,
             )
             losses.append(loss)
             parts.append(part)
