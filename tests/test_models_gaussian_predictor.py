@@ -12,6 +12,7 @@ from helpers import make_tiny_dataset
 
 from reconphys.assets.gaussians import SH_C0, Gaussians
 from reconphys.capture import default_camera
+from reconphys.capture.observation import stored_observation
 from reconphys.capture.placement import project
 from reconphys.errors import InputError
 from reconphys.geometry import quaternion_multiply
@@ -22,6 +23,7 @@ from reconphys.models.gaussian_predictor import (
 )
 from reconphys.models.gaussian_shipped import load_gaussian_predictor
 from reconphys.models.model_input import frame_crop
+from reconphys.models.reconstruct import object_distance
 from reconphys.render import Cameras, render
 from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
 
@@ -287,3 +289,34 @@ def test_a_crop_model_trains_on_the_realistic_look(tmp_path):
     log = [json.loads(x) for x in (out / "log.jsonl").read_text().splitlines()]
     assert all(math.isfinite(r["loss"]) for r in log)
     assert load_gaussian_predictor(out).model.config.crop
+
+
+def sliding_masks(rows: slice) -> torch.Tensor:  # [30, 64, 64]: 8 px wide, 1 px a frame right
+    masks = torch.zeros(30, 64, 64)
+    for t in range(30):
+        masks[t, rows, 14 + t : 22 + t] = 1.0
+    return masks
+
+
+def test_the_object_distance_without_a_fall_is_where_it_rests_on_the_ground():
+    """No free fall to read (the object slides along the ground from the first frame): the
+    distance is where the ray through its last lowest pixel meets the camera's ground — that
+    point is on z = 0 — and an object whose rays never meet the ground (above the horizon) is
+    refused, asking for the geometry."""
+    camera = default_camera(64, 64, view=0)
+    observations = []
+    for name, rows in (("slide", slice(44, 50)), ("sky", slice(2, 6))):
+        masks = sliding_masks(rows)
+        frames = masks[..., None].expand(-1, -1, -1, 3) * 0.5
+        observations.append(
+            stored_observation(frames, camera.K, camera.world_to_cam, 0.03, name, masks=masks)
+        )
+    depth, how = object_distance(observations[0])
+    assert how == "rest on the ground"
+    K, w2c = camera.K.double(), camera.world_to_cam.double()
+    pixel = torch.tensor([47.0, 50.0, 1.0], dtype=torch.float64)  # last frame: bottom edge, centre
+    point_cam = depth * torch.linalg.solve(K, pixel)
+    point_world = w2c[:3, :3].T @ (point_cam - w2c[:3, 3])
+    assert abs(float(point_world[2])) < 1e-6
+    with pytest.raises(InputError, match="--gaussians or --mesh"):
+        object_distance(observations[1])

@@ -190,6 +190,7 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
     # and the object-centric 3DGS predictor its geometry (hundreds of Gaussians, not a dozen)
     assert "gaussian_predictor_crop" in summary["geometry"]
     assert "object-centric" in summary["gs_model_choice"] and summary["gaussians"] >= 100
+    assert summary["object_distance"]["how"] == "fall" and summary["object_distance"]["m"] > 0.3
     assert 0.3 < estimate["distance_m"] < 20 and estimate["camera_height_m"] > 0
     out2 = tmp_path / "asset2"
     command = ["predict", str(video), "--out", str(out2), "--camera", "dataset", *flags]

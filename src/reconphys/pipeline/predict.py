@@ -38,7 +38,12 @@ from ..models.gaussian_shipped import (
     load_gaussian_predictor,
 )
 from ..models.model_input import network_input
-from ..models.reconstruct import initial_velocity, observed_asset, predicted_gaussians
+from ..models.reconstruct import (
+    initial_velocity,
+    object_distance,
+    observed_asset,
+    predicted_gaussians,
+)
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
 from .search import OBSERVABLES, observables
@@ -305,7 +310,11 @@ def predict_observation(
         if not isinstance(gs_model, LoadedGaussianPredictor):
             gs_model = load_gaussian_predictor(gs_model)
         object_centric = gs_model.model.config.crop
-        placed, gs_path = predicted_gaussians(observation, gs_model)
+        distance = None
+        if object_centric:  # the object-centric predictor places the object at its distance
+            distance, how = object_distance(observation)
+            details["object_distance"] = {"m": round(distance, 4), "how": how}
+        placed, gs_path = predicted_gaussians(observation, gs_model, distance)
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
         object_id = f"predicted-{Path(observation.source).stem}"
     if build_new:
