@@ -63,7 +63,9 @@ def predict_command(
         help="auto (--gaussians, else a dataset's true Gaussians, else the 3DGS predictor) or "
         "predicted (the 3DGS predictor even for a dataset sample).",
     ),
-    gs_model: Path = typer.Option(None, help="3DGS predictor (default: the shipped one)."),
+    gs_model: Path = typer.Option(
+        None, help="3DGS predictor (default: the shipped one for the recording's look)."
+    ),
     placement: str = typer.Option(
         "auto",
         help="Given PLY or mesh: auto, as-is or fit (moved onto frame 0's mask); refused when "

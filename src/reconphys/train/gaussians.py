@@ -152,15 +152,14 @@ def train_gaussian_predictor(
     """Run (or resume) the training described by ``settings``; returns the output folder."""
     out = Path(settings.out)
     dataset = DropDataset(settings.data, split=settings.split, frames=[0])
-    crop = bool(settings.predictor.get("crop", False))
-    if not crop:
+    resolution = dataset.settings.resolution
+    config = GaussianPredictorConfig(**{"resolution": resolution, **settings.predictor})
+    if not config.crop:
         dataset.settings.require_plain(
             settings.data, "train-gs", "make its data with --scene plain, or train a crop model"
         )
     if len(dataset) == 0:
         raise InputError(f"no samples in split {settings.split!r}", source=settings.data)
-    resolution = dataset.settings.resolution
-    config = GaussianPredictorConfig(**{"resolution": resolution, **settings.predictor})
     torch.manual_seed(settings.seed)
     model = GaussianPredictor(config)
     optimizer = torch.optim.Adam(model.parameters(), lr=settings.lr)
@@ -195,7 +194,7 @@ def train_gaussian_predictor(
         scatter = np.exp(settings.depth_noise * rng.standard_normal(len(picks)))
         for b, index in enumerate(picks):
             views = frame0_views(dataset, int(index))
-            if crop:
+            if config.crop:
                 views = crop_views(views, config.resolution, config.crop_margin)
             loss, part = sample_loss(
                 model,
