@@ -20,6 +20,12 @@ inside the attribute ranges (:func:`attributes_of`). Two stages, each a few batc
    profile and comes out as a wide interval; when it is nearly the prior's (:data:`UNDETERMINED`),
    the start value is kept for it instead of a best fit that is noise.
 
+With ``motion`` (the initial linear and angular velocity), six more coordinates join the
+coordinate search (the velocity in the camera's axes, the spin in the world's); the profiles stay
+those of the three observables. ``predict`` does not use it yet (docs/usage.md "Searching the
+initial motion with the physics": it recovers the motion from a sample's own asset, not yet the
+physics through predict's rebuilt one).
+
 Each round is one batched rollout and one batched render, so a whole search costs seconds at 64 px
 and 256 anchors on two cores (docs/training.md "Refinement by batched search"), against minutes
 for gradient steps, and it needs no gradient through contact, which is what moves friction.
@@ -38,12 +44,20 @@ from ..assets.asset import Asset
 from ..assets.gaussians import SH_C0, Gaussians
 from ..capture import CameraSpec
 from ..capture.window import comparison_view, object_window
+from ..geometry import rigid_velocity
 from ..physics import SpringMassModel, State, deform_means, rollout, scene_stable_substeps
 from ..physics.model import ATTRIBUTE_RANGES
 from ..render import render
 
 SPANS = (2.0, 0.7, 0.25)  # half-widths of the candidate grids in natural log of k/m and d/m
 FRICTION_SPAN_SCALE = 0.25  # friction's half-width = span × this
+# The initial motion, when searched: the linear velocity in the camera's axes (right, down,
+# along the view), the angular velocity in the world's.
+MOTION_NAMES = ("v_right", "v_down", "v_view", "w_x", "w_y", "w_z")
+ACROSS_VIEW_SPANS = (0.7, 0.25)  # the velocity across the view (the masks show it) only finely
+MOTION_BOUNDS = torch.tensor([[-3.0, 3.0]] * 3 + [[-8.0, 8.0]] * 3, dtype=torch.float64)
+V_SPAN_SCALE, W_SPAN_SCALE = 0.2, 0.75  # m/s and rad/s per unit of span
+SPAN_SCALES = (1.0, 1.0, FRICTION_SPAN_SCALE) + (V_SPAN_SCALE,) * 3 + (W_SPAN_SCALE,) * 3
 CANDIDATES = 7  # values per observable and round (one batched rollout)
 MIN_SUBSTEPS = 25  # as the cpu_small training recipe and pipeline/refine.py
 # A candidate replaces the current value only if its error is lower by this fraction: where the
@@ -165,10 +179,14 @@ def photometric_errors(
     asset: Asset,
     frames: Tensor,  # [T, H, W, 3] in [0, 1], frame 0 = the initial state
     camera: CameraSpec,  # the frames' camera, at their size
-    candidates: Tensor,  # [B, 3] (log k/m, log d/m, f)
+    candidates: Tensor,  # [B, 3] (log k/m, log d/m, f) or [B, 9] (+ initial motion, m/s, rad/s)
     min_substeps: int = MIN_SUBSTEPS,
+    silhouettes: Tensor | None = None,  # [T, H, W] the object's masks at the frames' size
+    silhouette_weight: float = 0.0,  # × the mean squared error of rendered alpha − mask
 ) -> Tensor:  # [B] mean squared error over frames 1..T−1
-    """Simulate the asset with each candidate's observables and score its video."""
+    """Simulate the asset with each candidate's observables and score its video. With 9 columns
+    the last six are the initial linear (m/s) and angular (rad/s, about the anchors' centroid)
+    velocity of a rigid motion, replacing the asset's v0."""
     count, physics = len(candidates), asset.physics
     values = attributes_of(candidates, physics.mass)
     steps = frames.shape[0] - 1
@@ -181,15 +199,25 @@ def photometric_errors(
     for group in substep_groups(need):
         index = torch.tensor(group)
         model = _candidate_model(asset, {n: v[index] for n, v in values.items()})
-        state = State(x0[index], asset.v0[None].expand(len(group), -1, -1))
+        if candidates.shape[1] == 9:
+            motion = candidates[index, 3:].to(x0)
+            v0 = rigid_velocity(x0[index], motion[:, :3], motion[:, 3:])
+        else:
+            v0 = asset.v0[None].expand(len(group), -1, -1)
+        state = State(x0[index], v0)
         substeps = max(need[b] for b in group)
         x[index] = rollout(model, state, steps, physics.frame_dt, substeps=substeps).x
     x = x[:, 1:].reshape(count * steps, -1, 3)  # [B·(T−1), N_A, 3]
     g = asset.gaussians
     means = deform_means(g.means, asset.x0[None], x, asset.binding_index, asset.binding_weight)
     batch = g.map(lambda t: t.expand(len(x), *t.shape)).with_means(means)
-    images = render(batch, camera.cameras()).rgb[:, 0].reshape(count, steps, *frames.shape[1:])
-    return ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
+    out = render(batch, camera.cameras())
+    images = out.rgb[:, 0].reshape(count, steps, *frames.shape[1:])
+    error = ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
+    if silhouettes is not None and silhouette_weight > 0:
+        alpha = out.alpha[:, 0].reshape(count, steps, *frames.shape[1:3])
+        error = error + silhouette_weight * ((alpha - silhouettes[1:][None]) ** 2).mean((1, 2, 3))
+    return error
 
 
 MIN_GAIN_PIXELS = 20  # object pixels needed to measure the lighting
@@ -267,6 +295,8 @@ def search(
     # one per observable; None: temperature_for(compared pixels)
     masks: Tensor | None = None,  # [T, H, W] the object's masks: compare only around them
     temperature_scale: float = 1.0,  # × the default temperature (predicted geometry: wider)
+    motion: Tensor | None = None,  # [6] initial (linear m/s, angular rad/s): searched with them
+    silhouette_weight: float = 0.0,  # × the silhouettes' squared error, added (needs masks)
 ) -> tuple[Asset, dict]:
     """Coordinate search from the asset's attributes, then profiles → (asset with the best, history
     dict with ``intervals`` {observable: [lo, hi]} when ``profiles``)."""
@@ -276,7 +306,13 @@ def search(
         raise ValueError(f"candidates: expected an odd number ≥ 3, got {candidates}")
     started = time.perf_counter()
     window = None if masks is None else object_window(masks)
-    frames, camera = comparison_view(frames, camera, resolution, window)
+    silhouettes = None
+    if masks is not None and silhouette_weight > 0:
+        both = torch.cat([frames, masks[..., None].to(frames)], -1)
+        both, camera = comparison_view(both, camera, resolution, window)
+        frames, silhouettes = both[..., :3], both[..., 3]
+    else:
+        frames, camera = comparison_view(frames, camera, resolution, window)
     gain = lighting_gain(asset.gaussians, frames[0], camera)
     compared = replace(asset, gaussians=scaled_colours(asset.gaussians, gain))
     size = list(frames.shape[1:3])
@@ -286,6 +322,21 @@ def search(
         temperature = (float(temperature),) * 3
     bounds = observable_bounds()
     start = observables(asset.physics)
+    names = OBSERVABLES
+    # the linear velocity is searched in the camera's axes (across the view: well seen; along
+    # it: barely), the spin in the world's
+    rotation = camera.world_to_cam[:3, :3].double()  # world → camera
+
+    def to_world(values: Tensor) -> Tensor:  # [B, 3 or 9], motion's velocity in camera axes
+        if values.shape[1] == 3:
+            return values
+        return torch.cat([values[:, :3], values[:, 3:6] @ rotation, values[:, 6:]], 1)
+
+    if motion is not None:
+        bounds = torch.cat([bounds, MOTION_BOUNDS])
+        motion = motion.double()
+        start = torch.cat([start, rotation @ motion[:3], motion[3:]])
+        names = OBSERVABLES + MOTION_NAMES
     current = torch.maximum(torch.minimum(start, bounds[:, 1]), bounds[:, 0])
     half = candidates // 2  # offsets −1..1 with an exact 0 at the centre (the current value)
     grid = torch.arange(-half, half + 1, dtype=torch.float64) / half
@@ -293,7 +344,7 @@ def search(
     best_error = math.inf
 
     def scale_of(i: int) -> float:
-        return 1.0 if i < 2 else FRICTION_SPAN_SCALE
+        return SPAN_SCALES[i]
 
     def step(i: int, offsets: Tensor, centre_at: int) -> tuple[Tensor, Tensor]:
         """Try ``current`` with observable i moved by ``offsets`` (``offsets[centre_at]`` = 0);
@@ -301,24 +352,28 @@ def search(
         nonlocal current, best_error
         trial = current.repeat(len(offsets), 1)
         trial[:, i] = (current[i] + offsets).clamp(*bounds[i].tolist())
-        errors = photometric_errors(compared, frames, camera, trial)
+        errors = photometric_errors(
+            compared, frames, camera, to_world(trial), silhouettes=silhouettes,
+            silhouette_weight=silhouette_weight,
+        )  # fmt: skip
         pick = int(errors.argmin())
         if not errors[pick] < errors[centre_at] * (1.0 - TIE):
             pick = centre_at  # the current value: kept unless another is clearly better
         current, best_error = trial[pick].clone(), float(errors[pick])
         rounds.append(
             {
-                "observable": OBSERVABLES[i],
+                "observable": names[i],
                 "values": trial[:, i].tolist(),
                 "errors": errors.tolist(),
             }
         )
         return trial[:, i], errors
 
-    def coordinate_search(spans_now):
+    def coordinate_search(spans_now, motion_too=True):
         for span in spans_now:
-            for i in range(3):
-                step(i, grid * span * scale_of(i), centre_at=half)
+            for i in range(len(current) if motion_too else 3):
+                if i not in (3, 4) or span in ACROSS_VIEW_SPANS:
+                    step(i, grid * span * scale_of(i), centre_at=half)
 
     def profile_pass() -> tuple[bool, list[tuple[Tensor, Tensor]]]:
         """One profile per observable (the others at their best); True if one moved the best."""
@@ -335,7 +390,7 @@ def search(
     if profiles:
         moved, found = profile_pass()
         if moved:  # a better basin than the start's: search it finely, profile again
-            coordinate_search(spans[1:])
+            coordinate_search(spans[1:], motion_too=False)
             moved, found = profile_pass()
         intervals = {
             name: list(profile_interval(v, e, tuple(bounds[i].tolist()), temperature[i]))
@@ -351,16 +406,17 @@ def search(
             for name, (v, e) in zip(OBSERVABLES, found, strict=True)
         }
     # only what moved: exp(log(k/m))·m would not give back k to the last bit
-    best = {n: float(v[0]) for n, v in attributes_of(current[None], asset.physics.mass).items()}
-    moved = (current != start).tolist()
+    best = {n: float(v[0]) for n, v in attributes_of(current[None, :3], asset.physics.mass).items()}
+    moved = (current[:3] != start[:3]).tolist()
     mass_moved = best["mass"] != asset.physics.mass
     changed = {"mass": mass_moved, "stiffness": moved[0] or mass_moved,
                "damping": moved[1] or mass_moved, "friction": moved[2]}  # fmt: skip
     found = {name: best[name] for name, yes in changed.items() if yes}
     history = {
         "method": "coordinate search + profiles (pipeline/search.py)",
-        "start": dict(zip(OBSERVABLES, start.tolist(), strict=True)),
-        "found": dict(zip(OBSERVABLES, current.tolist(), strict=True)),
+        "start": dict(zip(OBSERVABLES, start[:3].tolist(), strict=True)),
+        "found": dict(zip(OBSERVABLES, current[:3].tolist(), strict=True)),
+        "initial_motion": None if motion is None else to_world(current[None])[0, 3:].tolist(),
         "error": best_error,
         "lighting_gain": [round(float(g), 4) for g in gain],  # rendered colours × this
         "intervals": intervals,  # 10–90 % of the profile posterior (natural logs of SI ratios)
@@ -372,4 +428,8 @@ def search(
         "window": window,  # (left, top, width, height) of the recording compared; None: all
         "seconds": round(time.perf_counter() - started, 2),
     }
-    return replace(asset, physics=replace(asset.physics, **found)), history
+    result = replace(asset, physics=replace(asset.physics, **found))
+    if motion is not None:
+        found_motion = to_world(current[None])[0, 3:].to(asset.x0)
+        result = replace(result, v0=rigid_velocity(asset.x0, found_motion[:3], found_motion[3:]))
+    return result, history
