@@ -30,6 +30,7 @@ import torch
 from reconphys.capture.camera import CameraSpec
 from reconphys.capture.masks import subtract_background
 from reconphys.capture.placement import estimate_linear_velocity
+from reconphys.capture.video import read_video
 from reconphys.data import DropDataset
 from reconphys.geometry import rigid_velocity
 from reconphys.pipeline.search import observables, search
@@ -43,6 +44,13 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=10, help="test samples looked at")
     parser.add_argument("--modes", default=",".join(MODES))
     parser.add_argument("--silhouette-weight", type=float, default=0.0)
+    parser.add_argument("--temperature-scale", type=float, default=1.0)
+    parser.add_argument(
+        "--mp4",
+        action="store_true",
+        help="the frames decoded from view_0.mp4 "
+        "(as predict reads a recording) instead of the stored lossless frames",
+    )
     args = parser.parse_args()
     torch.set_num_threads(2)
     root = Path(args.data)
@@ -60,6 +68,9 @@ def main() -> None:
         size = item["frames"].shape[2]
         camera = CameraSpec(item["K"][0].double(), item["world_to_cam"][0].double(), size, size)
         frames = item["frames"][0][:20]
+        if args.mp4:
+            decoded = read_video(root / "samples" / item["id"] / "view_0.mp4")[0][:20]
+            frames = torch.from_numpy(decoded.astype(np.float32) / 255.0)[..., :3]
         stored = root / "samples" / item["id"] / "masks.npz"
         if stored.is_file():
             masks = torch.from_numpy(np.load(stored)["view_0"][:20]).float()
@@ -82,6 +93,7 @@ def main() -> None:
                 begin, frames, camera, masks=masks,
                 motion=torch.cat([linear, angular]) if mode == "joint" else None,
                 silhouette_weight=args.silhouette_weight if mode == "joint" else 0.0,
+                temperature_scale=args.temperature_scale,
             )  # fmt: skip
             seconds[mode].append(time.perf_counter() - clock)
             error = (observables(found.physics) - true_values).abs().numpy()

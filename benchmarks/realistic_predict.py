@@ -14,6 +14,9 @@ Printed: MAE of log k/m, log d/m and friction against the truth, beside the triv
 refusals and seconds a scene.
 
     python benchmarks/realistic_predict.py data/real_other --limit 20
+
+Intervals: the share of samples whose 10–90 % interval holds the truth. ``--split train``
+chooses a setting on training samples (never the test split).
 """
 
 from __future__ import annotations
@@ -51,11 +54,12 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=20)
     parser.add_argument("--configs", default=",".join(CONFIGS))
     parser.add_argument("--out", default=None, help="JSON file of the per-sample rows")
+    parser.add_argument("--split", default="test", help="test, or train to choose a setting")
     args = parser.parse_args()
     configs = args.configs.split(",")
     torch.set_num_threads(2)
     root = Path(args.data)
-    dataset = DropDataset(root, split="test", views=[0])
+    dataset = DropDataset(root, split=args.split, views=[0])
     trivial = observables({k: 0.5 * (lo + hi) for k, (lo, hi) in ATTRIBUTE_RANGES.items()})
     rows = []
     started = time.perf_counter()
@@ -86,10 +90,19 @@ def main() -> None:
                     row[config] = {"refused": str(e)}
                     continue
                 predicted = np.array([result.observables[k] for k in result.observables])
+                intervals = result.intervals
+                motion = result.details.get("initial_velocity", {})
                 row[config] = {
                     "predicted": predicted.tolist(),
                     "error": np.abs(predicted - truth).tolist(),
                     "seconds": time.perf_counter() - tic,
+                    "speed": float(np.linalg.norm(motion.get("linear_m_s", [np.nan] * 3))),
+                    "covered": None
+                    if intervals is None
+                    else [
+                        bool(lo <= t <= hi)
+                        for (lo, hi), t in zip(intervals.values(), truth, strict=True)
+                    ],
                 }
             rows.append(row)
             print(
@@ -117,11 +130,18 @@ def main() -> None:
         mae = np.mean([r[config]["error"] for r in done], axis=0)
         base = np.mean([np.abs(trivial - np.array(r["truth"])) for r in done], axis=0)
         seconds = np.mean([r[config]["seconds"] for r in done])
+        covered = [r[config]["covered"] for r in done if r[config]["covered"] is not None]
+        coverage = (
+            " / ".join(f"{100 * c:.0f} %" for c in np.mean(covered, axis=0)) if covered else "–"
+        )
         print(
             f"{config}: {len(done)} answered, {len(rows) - len(done)} refused; MAE log k/m "
             f"{mae[0]:.3f} log d/m {mae[1]:.3f} f {mae[2]:.3f} (trivial {base[0]:.3f} / "
             f"{base[1]:.3f} / {base[2]:.3f}; ratios {base[0] / mae[0]:.2f}× / "
-            f"{base[1] / mae[1]:.2f}× / {base[2] / mae[2]:.2f}×); {seconds:.1f} s a scene"
+            f"{base[1] / mae[1]:.2f}× / {base[2] / mae[2]:.2f}×); 10–90 % intervals cover "
+            f"{coverage}; {seconds:.1f} s a scene; initial speed read mean "
+            f"{np.mean([r[config]['speed'] for r in done]):.3f}, max "
+            f"{np.max([r[config]['speed'] for r in done]):.3f} m/s"
         )
     if args.out:
         Path(args.out).write_text(json.dumps(rows, indent=1))
