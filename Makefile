@@ -1,5 +1,5 @@
 # Two entry points for a fresh clone (see README):
-#   make demo   install into .venv, then read the shipped recording (examples/duck_toss) with predict
+#   make demo   install into .venv, then read the shipped recording (examples/duck_toss_scene) with predict
 #   make test   install into .venv, then lint, format check and the test suite (CPU only)
 PYTHON ?= python3
 VENV ?= .venv

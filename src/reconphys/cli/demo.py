@@ -1,7 +1,8 @@
 """``reconphys demo``: the main job on a shipped recording, video → asset (docs/usage.md#the-demo).
 
-The default reads ``examples/duck_toss`` with ``predict``'s default path and writes OUT/asset,
-OUT/preview.mp4, OUT/contact_sheet.png, OUT/prediction.json and OUT/summary.md. ``--example
+The default reads ``examples/duck_toss_scene`` (a realistic scene) with ``predict``'s default
+path and writes OUT/asset, OUT/preview.mp4, OUT/contact_sheet.png, OUT/prediction.json and
+OUT/summary.md. ``--example duck_toss`` is the same toss in the plain look; ``--example
 procedural`` is the older demo: build a procedural object and drop it (no video involved).
 """
 
@@ -42,7 +43,7 @@ def demo(
         Path("demo_out"), help="Output folder (an earlier demo's is replaced)."
     ),
     example: str = typer.Option(
-        None, help="A shipped recording (see --list; default duck_toss), or 'procedural'."
+        None, help="A shipped recording (see --list; default duck_toss_scene), or 'procedural'."
     ),
     list_examples: bool = typer.Option(False, "--list", help="List the examples and exit."),
     refine: bool = typer.Option(

@@ -22,7 +22,9 @@ from .search import OBSERVABLES, observables
 
 EXAMPLES_DIR = Path(__file__).resolve().parent.parent / "examples"
 EXAMPLE_FORMAT, EXAMPLE_VERSION = "reconphys.example", 1
-DEFAULT_EXAMPLE = "duck_toss"
+# The realistic look (a floor, a backdrop, a shadow, another camera, H.264): what a user films.
+# ``duck_toss`` is the same toss in the plain look (the object on black, the dataset's camera).
+DEFAULT_EXAMPLE = "duck_toss_scene"
 FUTURE_FRAMES = 60  # frames the preview simulates past the end of the recording
 OBSERVABLE_LABELS = {
     "log_k_over_m": "log k/m (stiffness / mass, ln 1/s²)",
