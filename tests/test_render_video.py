@@ -141,3 +141,32 @@ def test_eval_contact_sheet_unchanged(tmp_path):
     plots.contact_sheet(results, tmp_path / "new.png")
     _old_eval_sheet(results, tmp_path / "old.png")
     assert (tmp_path / "new.png").read_bytes() == (tmp_path / "old.png").read_bytes()
+
+
+def test_the_preview_outlines_the_masks_on_the_unmasked_recording():
+    """The preview's recording panel is the frames as filmed with the masks' outline in green:
+    the ring of a square mask, nothing inside it or outside it changed."""
+    frames = torch.rand(2, 12, 12, 3) * 0.5  # a floor and a backdrop: never pure green
+    masks = torch.zeros(2, 12, 12)
+    masks[:, 3:9, 4:10] = 1.0
+    shown = preview.outlined(frames, masks)
+    green = (shown == torch.tensor(preview.OUTLINE)).all(-1)  # [2, 12, 12]
+    ring = masks.bool().clone()
+    ring[:, 4:8, 5:9] = False  # the square less its interior: its border pixels
+    assert torch.equal(green, ring)
+    assert torch.equal(shown[~green], frames[~green])
+
+
+def test_a_recordings_unmasked_frames_are_kept_beside_the_masked_ones(tmp_path):
+    """``Observation.unmasked`` is what was filmed (background included); ``frames`` are those
+    times the masks, as the models read them."""
+    from reconphys.capture.observation import stored_observation
+
+    frames = torch.rand(4, 16, 16, 3)
+    masks = torch.zeros(4, 16, 16)
+    for t in range(4):
+        masks[t, 2 + 2 * t : 7 + 2 * t, 5:10] = 1.0  # a falling square
+    observation = stored_observation(frames, torch.eye(3) * 16, torch.eye(4), 0.03, "test",
+                                     masks=masks, mask_source="given")  # fmt: skip
+    assert torch.equal(observation.unmasked, frames)
+    assert torch.equal(observation.frames, frames * masks[..., None])

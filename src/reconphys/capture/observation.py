@@ -60,6 +60,11 @@ class Observation:
     recorded_frames: int = 0  # frames before resampling
     camera_estimate: dict | None = None  # how the camera was read from the video (no file)
     black_backdrop: bool = False  # the object on black, as the plain look of our data
+    recording: Tensor | None = None  # [T, H, W, 3] the frames before masking (None: = frames)
+
+    @property
+    def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
+        return self.frames if self.recording is None else self.recording
 
     @property
     def plain_look(self) -> bool:
@@ -89,7 +94,7 @@ def stored_observation(
     backdrop, or with ``masks`` from elsewhere (a realistic scene), checked as any recording's."""
     height, width = frames.shape[1:3]
     camera = CameraSpec(K.double(), world_to_cam.double(), width, height, 0.0, source)
-    black = masks is None
+    black, recording = masks is None, frames
     if black:  # the frames are already object-on-black
         masks = subtract_background(frames)
         mask_source = "background subtraction (black backdrop)"
@@ -97,6 +102,7 @@ def stored_observation(
         check_masks(masks, source)
         frames = frames * masks[..., None]
     return Observation(
+        recording=recording,
         frames=frames,
         masks=masks,
         camera=camera,
@@ -192,6 +198,7 @@ def load_observation(
     else:
         spec = read_camera(camera, width, height)
     return Observation(
+        recording=rgb,
         frames=rgb * chosen[..., None],
         masks=chosen,
         camera=spec,

@@ -431,6 +431,7 @@ def write_outputs(
     from .preview import (
         contact_sheet,
         interval_lines,
+        outlined,
         side_by_side,
         simulate_and_render,
         with_caption,
@@ -446,9 +447,10 @@ def write_outputs(
             started = time.perf_counter()
             count = max(preview_frames, result.observation.num_frames)
             simulated = simulate_and_render(result.asset, result.observation, count, device)
-            video = side_by_side(result.observation.frames, simulated)
+            recording = result.observation
+            observed = outlined(recording.unmasked, recording.masks)  # the masks as read
+            video = side_by_side(observed, simulated)
             write_mp4(staging / "preview.mp4", video, fps=1.0 / result.asset.physics.frame_dt)
-            observed = result.observation.frames
             sheet = contact_sheet(observed, simulated)
             caption = interval_lines(result.observables, result.intervals)
             write_image(staging / "preview.png", with_caption(sheet, caption))

@@ -19,6 +19,19 @@ from ..capture import Observation
 from .settings import PREVIEW_MIN_SIZE
 
 SEPARATOR = 2  # pixels of grey between the panels
+OUTLINE = (0.2, 1.0, 0.2)  # the masks' outline over the recording: what was taken for the object
+
+
+def outlined(
+    frames: Tensor,  # [T, H, W, 3] the recording as it was filmed (background included)
+    masks: Tensor,  # [T, H, W] in {0, 1}
+) -> Tensor:  # [T, H, W, 3]
+    """The recording with each mask's outline (its pixels next to a background pixel) drawn in
+    green: the preview shows what ``predict`` took for the object, so a wrong mask shows."""
+    inside = masks[:, None].float()
+    eroded = 1.0 - F.max_pool2d(1.0 - inside, 3, stride=1, padding=1)
+    edge = ((inside - eroded)[:, 0] > 0.5)[..., None]
+    return torch.where(edge, torch.tensor(OUTLINE, dtype=frames.dtype), frames)
 
 
 def _enlarge(images: Tensor, factor: int) -> Tensor:  # [T, H, W, 3] → [T, fH, fW, 3]
