@@ -447,8 +447,8 @@ def write_outputs(
             started = time.perf_counter()
             count = max(preview_frames, result.observation.num_frames)
             simulated = simulate_and_render(result.asset, result.observation, count, device)
-            recording = result.observation
-            observed = outlined(recording.unmasked, recording.masks)  # the masks as read
+            observation = result.observation
+            observed = outlined(observation.unmasked, observation.masks)  # the masks as read
             video = side_by_side(observed, simulated)
             write_mp4(staging / "preview.mp4", video, fps=1.0 / result.asset.physics.frame_dt)
             sheet = contact_sheet(observed, simulated)
