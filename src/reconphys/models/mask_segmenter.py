@@ -112,18 +112,24 @@ def frame_inputs(
 
 
 @torch.no_grad()
-def segment_clip(model: MaskSegmenter, frames: Tensor) -> Tensor:
-    """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera)."""
+def clip_logits(model: MaskSegmenter, frames: Tensor) -> Tensor:
+    """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera)."""
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
         raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
     frames = frames.float()
     references = clip_references(frames)
     times = torch.linspace(0, 1, frames.shape[0])
-    masks = []
+    logits = []
     for start in range(0, frames.shape[0], FRAMES_PER_CALL):
         part = slice(start, start + FRAMES_PER_CALL)
-        masks.append(model(frame_inputs(frames[part], references, times[part])) > 0)
-    return keep_main_blob(torch.cat(masks)).float()
+        logits.append(model(frame_inputs(frames[part], references, times[part])))
+    return torch.cat(logits)
+
+
+def segment_clip(model: MaskSegmenter, frames: Tensor) -> Tensor:
+    """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera): logits
+    above 0, the main blob kept."""
+    return keep_main_blob(clip_logits(model, frames) > 0).float()
 
 
 def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:
@@ -140,6 +146,14 @@ def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:
             mask = np.isin(labels, 1 + np.nonzero(sizes >= share * sizes.max())[0])
         kept.append(torch.from_numpy(mask))
     return torch.stack(kept).to(masks.device)
+
+
+def shipped_fingerprint(path: str | os.PathLike | None = None) -> str:
+    """The first 16 hex digits of the SHA-256 of the segmenter's weights (default: shipped)."""
+    import hashlib
+
+    path = SHIPPED_MASKS_PATH if path is None else Path(path)
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
 
 
 def save_mask_segmenter(model: MaskSegmenter, path: str | os.PathLike, training: dict) -> Path:
