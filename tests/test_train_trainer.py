@@ -16,6 +16,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from helpers import train_tiny_gaussian_predictor
@@ -416,6 +417,73 @@ def test_object_crops_read_the_realistic_look_and_train(tmp_path):
     assert predictor.model.config.crop
     out = predictor.predict(torch.nn.functional.pad(frames, (0, 0, 0, 20, 10, 0))[None])
     assert torch.isfinite(out["unit"]).all()
+
+
+def test_object_crops_train_on_the_masks_segment_data_wrote(tmp_path):
+    """`reconphys segment-data` writes the shipped segmenter's masks of every view beside a
+    realistic folder's frames (the masks predict makes of a recording, from all its frames),
+    keeps them on a second run, refuses a plain folder; data.masks = "segmenter" cuts the object
+    out with them, and refuses masks that are missing or from another segmenter."""
+    from reconphys.data.dataset import SEGMENTER_MASKS
+    from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
+
+    realistic = ("data.generate.scene=realistic", "data.generate.resolution=24")
+    crop = ("objective.kind=supervised", "model.inputs=track", "model.crop=true")
+    settings = TrainingSamples(tiny(tmp_path, *realistic, *crop).data, crop=True).settings
+    folder = tmp_path / "real"
+    make_dataset(replace(settings, objects=1), folder, workers=1, device="cpu")
+    with pytest.raises(InputError, match="model of object crops"):
+        tiny(tmp_path, *realistic, *crop, "data.masks=segmenter")  # generated data: none stored
+    config = tiny(tmp_path, *crop, f"data.source={folder}", "data.masks=segmenter")
+    with pytest.raises(InputError, match="segment-data"):
+        TrainingSamples(config.data, assets=False, crop=True)
+    result = runner.invoke(app, ["segment-data", str(folder), "--workers", "1", "--no-progress"])
+    assert result.exit_code == 0, result.output
+    stored = DropDataset(folder, split=None)
+    model = load_mask_segmenter()
+    for index in range(len(stored)):
+        frames, masks = stored[index]["frames"], stored.masks(index, "segmenter")
+        for view in range(4):
+            assert torch.equal(masks[view], segment_clip(model, frames[view]).bool())
+    path = folder / stored.samples[0]["dir"] / SEGMENTER_MASKS
+    written = path.stat().st_mtime_ns
+    assert runner.invoke(app, ["segment-data", str(folder), "--no-progress"]).exit_code == 0
+    assert path.stat().st_mtime_ns == written  # kept
+    samples = TrainingSamples(config.data, assets=False, crop=True)
+    view0 = DropDataset(folder, "train", views=[0], frames=range(4))
+    frames = view0[0]["frames"][0] * view0.masks(0, "segmenter")[0, ..., None]
+    assert torch.allclose(samples[0]["frames"][0], object_crop(frames, 16))
+    truth = view0[0]["frames"][0] * view0.masks(0)[0, ..., None]
+    assert not torch.allclose(frames, truth)  # the segmenter's masks are not the true ones
+    cached = TrainingSamples(replace(config.data, cache=True), assets=False, crop=True)
+    decoded, again = cached[0]["frames"], cached[0]["frames"]  # resampled crops: half precision
+    assert cached.cache[0]["frames"].dtype == torch.float16 and again.dtype == torch.float32
+    assert torch.allclose(decoded, again, atol=1e-3) and torch.equal(decoded, samples[0]["frames"])
+    both = TrainingSamples(replace(config.data, masks="both"), assets=False, crop=True)
+    assert len(both) == 2 * len(samples)  # every video twice: cut out by each kind of masks
+    assert torch.allclose(both[0]["frames"][0], object_crop(truth, 16))
+    assert torch.equal(both[1]["frames"], samples[0]["frames"])
+    assert both.sample_id(1) == samples.sample_id(0) + "/segmenter-masks"
+    assert (
+        len(
+            {
+                both.fingerprint(),
+                samples.fingerprint(),
+                TrainingSamples(
+                    replace(config.data, masks="true"), assets=False, crop=True
+                ).fingerprint(),
+            }
+        )
+        == 3
+    )
+    arrays = dict(np.load(path))
+    np.savez(path, **{**arrays, "segmenter_sha256": np.array("0" * 16)})
+    with pytest.raises(InputError, match="another mask segmenter"):
+        TrainingSamples(config.data, assets=False, crop=True)
+    plain = tmp_path / "plain"
+    make_dataset(replace(settings, scene="plain", objects=1), plain, workers=1, device="cpu")
+    result = runner.invoke(app, ["segment-data", str(plain), "--no-progress"])
+    assert result.exit_code != 0 and "plain-look" in result.output
 
 
 def test_more_sources_add_the_same_objects_drops_from_other_seeds(folder, tmp_path):

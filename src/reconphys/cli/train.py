@@ -1,6 +1,7 @@
 """Training commands: ``train`` (the physics predictor), ``train-gs`` (the 3DGS predictor), both
 reading a config file into their settings dataclass (docs/training.md, docs/usage.md), and
-``train-masks`` (the mask segmenter, docs/usage.md#masks-without-a-clean-plate)."""
+``train-masks`` (the mask segmenter, docs/usage.md#masks-without-a-clean-plate), ``segment-data``
+(its masks of a dataset, to train on)."""
 
 from __future__ import annotations
 
@@ -164,3 +165,26 @@ def train_masks(
     set_cpu_threads(threads)
     path = train_mask_segmenter(settings, progress=not no_progress, log=typer.echo)
     typer.echo(f"wrote {path}")
+
+
+@app.command("segment-data")
+@user_errors
+def segment_data(
+    data: Path = typer.Argument(
+        ..., help="Realistic-look dataset folder (make-data --scene realistic)."
+    ),
+    workers: int = typer.Option(2, help="Worker processes (one CPU thread each)."),
+    overwrite: bool = typer.Option(False, help="Write again the samples that have them."),
+    no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
+):
+    """Write the shipped mask segmenter's masks of every view of every sample beside its frames
+    (segmenter_masks.npz): the masks a user without masks gets, to train a model of object crops
+    on (data.masks = "segmenter", docs/training.md)."""
+    from ..train.masks import segment_dataset
+
+    if workers < 1:
+        raise InputError(f"must be ≥ 1, got {workers}", field="--workers")
+    if not data.is_dir():
+        raise InputError("dataset folder not found", source=str(data))
+    count = segment_dataset(data, workers, overwrite, progress=not no_progress)
+    typer.echo(f"segmenter masks of {count} samples in {data} (segmenter_masks.npz beside frames)")

@@ -41,6 +41,11 @@ from .settings import DataSettings
 from .sources import open_source
 from .storage import read_manifest, read_object, read_sample_meta, sample_is_complete
 
+# `reconphys segment-data` writes each realistic sample's mask-segmenter masks beside its frames:
+# every view ("view_V": [T, H, W] bool) and the weights' fingerprint they came from
+SEGMENTER_MASKS = "segmenter_masks.npz"
+SEGMENTER_FINGERPRINT = "segmenter_sha256"
+
 
 def _frame_range(frames, num_frames: int) -> list[int]:
     if frames is None:
@@ -229,15 +234,36 @@ class DropDataset(Dataset, _Selection):
         obj = scale_object(self.object(index), float(state.get("scale", 1.0)))
         return sample_asset(obj, spec, placement, self.settings)
 
-    def masks(self, index: int) -> torch.Tensor:  # [V, T, H, W] bool at the stored resolution
-        """The true masks of a realistic sample's selected views and frames."""
+    def masks(self, index: int, kind: str = "true") -> torch.Tensor:  # [V, T, H, W] bool
+        """The object's masks of a realistic sample's selected views and frames, at the stored
+        resolution: the true ones (``kind="true"``), or the mask segmenter's that ``reconphys
+        segment-data`` wrote beside them (``kind="segmenter"``: what a user without masks gets)."""
         entry = self.samples[index]
-        if "masks" not in entry:
-            raise InputError("stores no masks (made with --scene plain)", str(self.root))
         names = tuple(f"view_{v}" for v in self.views)
-        stored = read_npz(self.root / entry["masks"], names)
+        if kind == "segmenter":
+            stored = read_npz(self._segmenter_masks(index), names)
+        elif kind == "true":
+            if "masks" not in entry:
+                raise InputError("stores no masks (made with --scene plain)", str(self.root))
+            stored = read_npz(self.root / entry["masks"], names)
+        else:
+            raise ValueError(f"kind: expected true or segmenter, got {kind!r}")
         masks = np.stack([stored[n] for n in names])[:, self.frame_index]
         return torch.from_numpy(masks.astype(bool))
+
+    def segmenter_fingerprint(self, index: int) -> str:
+        """The weights fingerprint recorded with sample ``index``'s segmenter masks."""
+        path = self._segmenter_masks(index)
+        return str(read_npz(path, (SEGMENTER_FINGERPRINT,))[SEGMENTER_FINGERPRINT])
+
+    def _segmenter_masks(self, index: int) -> Path:
+        path = self.root / self.samples[index]["dir"] / SEGMENTER_MASKS
+        if not path.is_file():
+            raise InputError(
+                f"no mask segmenter's masks (write them with `reconphys segment-data {self.root}`)",
+                str(path),
+            )
+        return path
 
 
 class GeneratedDropDataset(Dataset, _Selection):

@@ -45,6 +45,7 @@ SCHEDULES = ("cosine", "constant")
 AMP_DTYPES = ("bfloat16", "float16")
 SPLITS = ("train", "test", "all")
 GEOMETRIES = ("true", "predicted")
+MASK_KINDS = ("true", "segmenter", "both")
 DERIVED_MODEL_KEYS = {"num_frames": "data.frames", "resolution": "data.resolution"}
 
 
@@ -60,13 +61,17 @@ class DataConfig:
     # further folders made like data.source but with another seed: their samples of the same
     # objects (those data.source and data.objects select) are read too — more drops of each
     more_sources: tuple[str, ...] = ()
-    cache: bool = False  # keep each decoded video in memory (uint8): later epochs read no files
+    cache: bool = False  # keep each video in memory (uint8, or float16 when resampled): no rereads
     frames: int = 20  # the predictor reads frames 0..frames−1; the loss compares 1..frames−1
     resolution: int = 64  # predictor input, pixels (square; frames are resized to it)
     render_resolution: int = 0  # size of the photometric loss' renders, pixels (0: resolution)
     num_workers: int = 0  # DataLoader worker processes (0: load in the training process)
     geometry: str = "true"  # true (the dataset's assets) or predicted (the frozen 3DGS predictor)
     gs_model: str = ""  # geometry = predicted: a 3DGS predictor (.safetensors or run); "": shipped
+    # a realistic-look folder read by a model of object crops: the object cut out by its true
+    # masks, the mask segmenter's (written by `reconphys segment-data`: what predict gets), or
+    # both (each video twice, cut out by each)
+    masks: str = "true"
 
     @property
     def loss_resolution(self) -> int:
@@ -264,6 +269,13 @@ def _validate(config: TrainConfig) -> None:
     )
     _require(d.num_workers >= 0, "data.num_workers", f"must be ≥ 0, got {d.num_workers}")
     _choice(d.geometry, GEOMETRIES, "data.geometry")
+    _choice(d.masks, MASK_KINDS, "data.masks")
+    _require(
+        d.masks == "true" or (d.source != GENERATE and m.crop),
+        "data.masks",
+        "the segmenter's masks are read from a realistic-look folder by a model of object "
+        "crops (model.crop = true)",
+    )
     _require(
         d.geometry == "predicted" or not d.gs_model,
         "data.gs_model",

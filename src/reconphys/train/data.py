@@ -115,9 +115,13 @@ class Folders(Dataset):
         name = self.parts[part].samples[inner]["id"]
         return f"source{part}/{name}" if part else name
 
-    def masks(self, index: int) -> Tensor:
+    def masks(self, index: int, kind: str = "true") -> Tensor:
         part, index = self._where[index]
-        return self.parts[part].masks(index)
+        return self.parts[part].masks(index, kind)
+
+    def segmenter_fingerprint(self, index: int) -> str:
+        part, index = self._where[index]
+        return self.parts[part].segmenter_fingerprint(index)
 
     def asset(self, index: int) -> Asset:
         part, index = self._where[index]
@@ -192,6 +196,11 @@ class TrainingSamples(Dataset):
         if len(self.dataset) == 0:
             raise InputError(f"no samples in split {config.split!r}", field="data.split")
         self.assets = assets
+        # the masks that cut a realistic video's object out: each kind its own copy of the video
+        self.mask_kinds = ("true", "segmenter") if config.masks == "both" else (config.masks,)
+        self.per_sample = len(self.views) * len(self.mask_kinds)  # items (videos) per sample
+        if self.crop and self.settings.scene != "plain" and "segmenter" in self.mask_kinds:
+            self._check_segmenter_masks()
         self.cache: dict[int, dict] | None = {} if config.cache else None
         self.gs_predictor = None
         self.geometry = GEOMETRY
@@ -202,6 +211,20 @@ class TrainingSamples(Dataset):
             self.geometry = PREDICTED_GEOMETRY.format(gs_model=self.gs_predictor.path)
             self._asset_attributes = self.medians()  # replaced by the objective's
         self._predicted_assets: dict[int, Asset] = {}  # item index → asset (deterministic)
+
+    def _check_segmenter_masks(self) -> None:
+        """The stored segmenter masks came from the shipped segmenter (first and last sample)."""
+        from ..models.mask_segmenter import shipped_fingerprint
+
+        expected = shipped_fingerprint()
+        for index in (0, len(self.dataset) - 1):
+            if self.dataset.segmenter_fingerprint(index) != expected:
+                raise InputError(
+                    "its segmenter masks came from another mask segmenter than the shipped one: "
+                    "write them again with `reconphys segment-data --overwrite`",
+                    source=self.source,
+                    field="data.masks",
+                )
 
     def _more(self, config: DataConfig, first: DropDataset, view: int, resolution):
         """data.more_sources' samples of ``first``'s objects (view ``view``)."""
@@ -232,12 +255,20 @@ class TrainingSamples(Dataset):
             )
 
     def __len__(self) -> int:
-        return len(self.dataset) * len(self.views)
+        return len(self.dataset) * self.per_sample
+
+    def _video_of(self, index: int) -> tuple[int, int, str]:
+        """Item ``index`` → (sample, position in self.views, mask kind)."""
+        sample, inner = divmod(index, self.per_sample)
+        kind, view = divmod(inner, len(self.views))
+        return sample, view, self.mask_kinds[kind]
 
     def sample_id(self, index: int) -> str:
-        index, view = divmod(index, len(self.views))
+        sample, view, kind = self._video_of(index)
         suffix = f"/view{self.views[view]}" if len(self.views) > 1 else ""
-        return self._sample_id(index) + suffix
+        if len(self.mask_kinds) > 1:
+            suffix += f"/{kind}-masks"
+        return self._sample_id(sample) + suffix
 
     def _sample_id(self, index: int) -> str:
         if isinstance(self.dataset, Folders):
@@ -248,7 +279,7 @@ class TrainingSamples(Dataset):
 
     def asset(self, index: int) -> Asset:
         """The sample's placed object with its true attributes and initial velocity."""
-        index //= len(self.views)
+        index //= self.per_sample
         if not isinstance(self.dataset, GeneratedDropDataset):
             return self.dataset.asset(index)
         planned = self.dataset.samples[index]
@@ -283,19 +314,25 @@ class TrainingSamples(Dataset):
             item = dict(self.cache[index])
             if item["frames"].dtype == torch.uint8:
                 item["frames"] = item["frames"].float() / 255
+            else:
+                item["frames"] = item["frames"].float()
             return item
-        dataset, sample = self.per_view[index % len(self.views)], index // len(self.views)
+        sample, view, kind = self._video_of(index)
+        dataset = self.per_view[view]
         item = dataset[sample]
         if self.crop:
             frames = item["frames"][0]  # [T, H, W, 3]
             if self.settings.scene != "plain":  # the object on black, as predict masks it
-                frames = frames * dataset.masks(sample)[0, ..., None].to(frames)
+                masks = dataset.masks(sample, *(() if kind == "true" else (kind,)))[0]
+                frames = frames * masks[..., None].to(frames)
             item = {**item, "frames": object_crop(frames, self.crop)}
         if self.cache is not None:
             kept = {k: item[k] for k in ("frames", "K", "world_to_cam", "attributes")}
             quantised = (item["frames"] * 255).round().to(torch.uint8)
             if torch.equal(quantised.float() / 255, item["frames"]):
                 kept["frames"] = quantised
+            else:  # resampled (object crops): half precision, ~1e-4 off, half the memory
+                kept["frames"] = item["frames"].to(torch.float16).contiguous()
             self.cache[index] = kept
         return item
 
@@ -334,7 +371,8 @@ class TrainingSamples(Dataset):
     def fingerprint(self) -> str:
         """Hash of the data settings and the sample list: a resumed run must see the same."""
         ids = ",".join(self.sample_id(i) for i in range(len(self)))
-        text = f"{self.settings.fingerprint()}|{ids}"
+        masks = "" if self.mask_kinds == ("true",) else f"|masks {'+'.join(self.mask_kinds)}"
+        text = f"{self.settings.fingerprint()}|{ids}{masks}"
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

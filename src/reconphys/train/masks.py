@@ -1,4 +1,5 @@
-"""Training the mask segmenter (``reconphys train-masks``, models/mask_segmenter.py).
+"""Training the mask segmenter (``reconphys train-masks``, models/mask_segmenter.py), and
+writing its masks beside a realistic dataset's frames (``reconphys segment-data``).
 
 Examples are single frames of realistic-look datasets (``make-data --scene realistic``, which
 stores the true masks): every view of every training-split sample is a clip; a step draws
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
+import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -21,13 +24,17 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..data.dataset import DropDataset
+from ..data.dataset import SEGMENTER_FINGERPRINT, SEGMENTER_MASKS, DropDataset
 from ..errors import InputError
+from ..io import atomic_file
 from ..models.mask_segmenter import (
     MaskSegmenter,
     clip_references,
     frame_inputs,
+    load_mask_segmenter,
     save_mask_segmenter,
+    segment_clip,
+    shipped_fingerprint,
 )
 from .checkpoint import resume_step, save_step
 
@@ -149,3 +156,62 @@ def train_mask_segmenter(settings: MaskTrainSettings, progress: bool = True, log
         "final_loss": loss.item(),
     }
     return save_mask_segmenter(model.eval(), out / "model.safetensors", training)
+
+
+def _segment_samples(job: tuple[str, list[int], bool]) -> int:
+    """Worker: write the shipped segmenter's masks of samples ``indices`` of ``root``."""
+    root, indices, overwrite = job
+    torch.set_num_threads(1)
+    model = load_mask_segmenter()
+    fingerprint = shipped_fingerprint()
+    dataset = DropDataset(root, split=None)  # every view, every frame
+    for index in indices:
+        path = dataset.root / dataset.samples[index]["dir"] / SEGMENTER_MASKS
+        if path.is_file() and not overwrite:
+            continue
+        frames = dataset[index]["frames"]  # [V, T, H, W, 3]
+        arrays = {
+            f"view_{v}": segment_clip(model, frames[i]).bool().numpy()
+            for i, v in enumerate(dataset.views)
+        }
+        with atomic_file(path) as tmp:
+            np.savez_compressed(tmp, **arrays, **{SEGMENTER_FINGERPRINT: np.array(fingerprint)})
+    return len(indices)
+
+
+def segment_dataset(
+    root: str | os.PathLike, workers: int = 2, overwrite: bool = False, progress: bool = True
+) -> int:
+    """Write the shipped mask segmenter's masks of every view of every sample of a realistic-look
+    dataset beside its frames (``SEGMENTER_MASKS``: what ``predict`` reads from a recording
+    without masks), for training on them (``data.masks = "segmenter"``). Samples that have them
+    are kept unless ``overwrite``. Returns the number of samples."""
+    dataset = DropDataset(root, split=None)
+    if dataset.settings.scene == "plain":
+        raise InputError(
+            "a plain-look dataset: its object is on black, cut out by its colour (no segmenter)",
+            source=str(root),
+        )
+    count = len(dataset)
+    jobs = [(str(root), list(range(s, min(count, s + 16))), overwrite) for s in range(0, count, 16)]
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=count, desc="segment-data", unit="sample")
+    if workers <= 1:
+        results = map(_segment_samples, jobs)
+    else:
+        pool = multiprocessing.get_context("spawn").Pool(workers)
+        results = pool.imap_unordered(_segment_samples, jobs)
+    try:
+        for done in results:
+            if bar is not None:
+                bar.update(done)
+    finally:
+        if workers > 1:
+            pool.close()
+            pool.join()
+        if bar is not None:
+            bar.close()
+    return count
