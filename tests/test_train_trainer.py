@@ -484,6 +484,9 @@ def test_object_crops_train_on_the_masks_segment_data_wrote(tmp_path):
     make_dataset(replace(settings, scene="plain", objects=1), plain, workers=1, device="cpu")
     result = runner.invoke(app, ["segment-data", str(plain), "--no-progress"])
     assert result.exit_code != 0 and "plain-look" in result.output
+    with pytest.raises(InputError, match="no masks to choose"):
+        plain_config = tiny(tmp_path, *crop, f"data.source={plain}", "data.masks=both")
+        TrainingSamples(plain_config.data, assets=False, crop=True)
 
 
 def test_more_sources_add_the_same_objects_drops_from_other_seeds(folder, tmp_path):

@@ -199,7 +199,13 @@ class TrainingSamples(Dataset):
         # the masks that cut a realistic video's object out: each kind its own copy of the video
         self.mask_kinds = ("true", "segmenter") if config.masks == "both" else (config.masks,)
         self.per_sample = len(self.views) * len(self.mask_kinds)  # items (videos) per sample
-        if self.crop and self.settings.scene != "plain" and "segmenter" in self.mask_kinds:
+        if self.mask_kinds != ("true",):
+            if self.settings.scene == "plain":
+                raise InputError(
+                    "a plain-look folder: its object is on black, there are no masks to choose",
+                    source=self.source,
+                    field="data.masks",
+                )
             self._check_segmenter_masks()
         self.cache: dict[int, dict] | None = {} if config.cache else None
         self.gs_predictor = None
