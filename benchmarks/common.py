@@ -1,4 +1,5 @@
-"""Shared benchmark helpers: a description of the machine, and CUDA-aware timing."""
+"""Shared benchmark helpers: a description of the machine, CUDA-aware timing, and the mean
+mask IoU of a clip."""
 
 from __future__ import annotations
 
@@ -52,3 +53,9 @@ def timed(fn: Callable[[], object], device: str, repeats: int = 3) -> float:
         sync()
         best = min(best, time.perf_counter() - start)
     return best
+
+
+def mean_mask_iou(prediction: torch.Tensor, truth: torch.Tensor) -> float:
+    """IoU of two [T, H, W] masks (> 0.5), per frame, averaged over the frames."""
+    p, t = prediction > 0.5, truth > 0.5
+    return float(((p & t).sum((1, 2)) / (p | t).sum((1, 2)).clamp_min(1)).mean())

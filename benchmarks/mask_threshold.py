@@ -16,14 +16,10 @@ import platform
 
 import numpy as np
 import torch
+from common import mean_mask_iou
 
 from reconphys.data import DropDataset
 from reconphys.models.mask_segmenter import clip_logits, keep_main_blob, load_mask_segmenter
-
-
-def iou(prediction: torch.Tensor, truth: torch.Tensor) -> float:
-    p, t = prediction > 0.5, truth > 0.5
-    return float(((p & t).sum((1, 2)) / (p | t).sum((1, 2)).clamp_min(1)).mean())
 
 
 def main() -> None:
@@ -47,7 +43,7 @@ def main() -> None:
             logits = clip_logits(model, frames)
             for threshold in thresholds:
                 masks = keep_main_blob(logits > threshold).float()
-                scores.setdefault(threshold, []).append(iou(masks, truth))
+                scores.setdefault(threshold, []).append(mean_mask_iou(masks, truth))
         for key, values in scores.items():
             pooled.setdefault(key, []).extend(values)
         print(f"{spec} ({len(dataset)} clips):")

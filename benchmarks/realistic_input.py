@@ -27,16 +27,12 @@ import time
 
 import numpy as np
 import torch
+from common import mean_mask_iou
 
 from reconphys.capture.calibrate import DEFAULT_FOV_DEG, estimate_camera
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
-
-
-def iou(prediction: torch.Tensor, truth: torch.Tensor) -> float:
-    p, t = prediction > 0.5, truth > 0.5
-    return float(((p & t).sum((1, 2)) / (p | t).sum((1, 2)).clamp_min(1)).mean())
 
 
 def camera_errors(masks, item, meta, fov_deg) -> dict:
@@ -90,8 +86,8 @@ def main() -> None:
         row = {
             "id": item["id"],
             "launch": meta["initial_state"]["launch"],
-            "iou_segmenter": iou(masks, truth),
-            "iou_median": iou(median, truth),
+            "iou_segmenter": mean_mask_iou(masks, truth),
+            "iou_median": mean_mask_iou(median, truth),
             "segment_seconds": seconds,
         }
         fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(item["K"][0, 1, 1])))

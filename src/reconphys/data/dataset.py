@@ -309,8 +309,13 @@ class GeneratedDropDataset(Dataset, _Selection):
                 self._objects.popitem(last=False)
         return self._objects[planned.key]
 
-    def masks(self, index: int) -> torch.Tensor:  # [V, T, H, W] bool
-        """The true masks of a realistic sample's selected views and frames (generated again)."""
+    def masks(self, index: int, kind: str = "true") -> torch.Tensor:  # [V, T, H, W] bool
+        """The true masks of a realistic sample's selected views and frames (generated again;
+        generated samples have no segmenter masks: ``kind`` must be "true")."""
+        if kind != "true":
+            raise InputError(
+                f"generated samples have only their true masks, not {kind!r}", "settings"
+            )
         if self.settings.scene != "realistic":
             raise InputError("stores no masks (settings with scene plain)", "settings")
         planned = self.samples[index]

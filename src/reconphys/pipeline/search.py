@@ -343,9 +343,6 @@ def search(
     rounds = []
     best_error = math.inf
 
-    def scale_of(i: int) -> float:
-        return SPAN_SCALES[i]
-
     def step(i: int, offsets: Tensor, centre_at: int) -> tuple[Tensor, Tensor]:
         """Try ``current`` with observable i moved by ``offsets`` (``offsets[centre_at]`` = 0);
         keep the best → (the values tried, their errors)."""
@@ -373,7 +370,7 @@ def search(
         for span in spans_now:
             for i in range(len(current) if motion_too else 3):
                 if i not in (3, 4) or span in ACROSS_VIEW_SPANS:
-                    step(i, grid * span * scale_of(i), centre_at=half)
+                    step(i, grid * span * SPAN_SCALES[i], centre_at=half)
 
     def profile_pass() -> tuple[bool, list[tuple[Tensor, Tensor]]]:
         """One profile per observable (the others at their best); True if one moved the best."""
@@ -382,7 +379,7 @@ def search(
         for i in range(3):
             wide = torch.linspace(*bounds[i].tolist(), PROFILE_POINTS, dtype=torch.float64)
             zero = torch.zeros(1, dtype=torch.float64)
-            found.append(step(i, torch.cat([zero, local * scale_of(i), wide - current[i]]), 0))
+            found.append(step(i, torch.cat([zero, local * SPAN_SCALES[i], wide - current[i]]), 0))
         return bool((current != before).any()), found
 
     coordinate_search(spans)

@@ -329,7 +329,7 @@ class TrainingSamples(Dataset):
         if self.crop:
             frames = item["frames"][0]  # [T, H, W, 3]
             if self.settings.scene != "plain":  # the object on black, as predict masks it
-                masks = dataset.masks(sample, *(() if kind == "true" else (kind,)))[0]
+                masks = dataset.masks(sample, kind)[0]
                 frames = frames * masks[..., None].to(frames)
             item = {**item, "frames": object_crop(frames, self.crop)}
         if self.cache is not None:
