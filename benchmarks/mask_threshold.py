@@ -28,10 +28,11 @@ def main() -> None:
     parser.add_argument(
         "--thresholds", default="-3,-2,-1,-0.5,0,0.5,1", help="logits, comma-separated"
     )
+    parser.add_argument("--segmenter", default=None, help="weights (default: the shipped ones)")
     args = parser.parse_args()
     torch.set_num_threads(2)
     thresholds = [float(t) for t in args.thresholds.split(",")]
-    model = load_mask_segmenter()
+    model = load_mask_segmenter(args.segmenter)
     print(f"the segmenter's masks: logits > 0; {platform.machine()}, torch {torch.__version__}")
     pooled = {}
     for spec in args.data:

@@ -32,7 +32,7 @@ from common import mean_mask_iou
 from reconphys.capture.calibrate import DEFAULT_FOV_DEG, estimate_camera
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
-from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
+from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, segment_clip
 
 
 def camera_errors(masks, item, meta, fov_deg) -> dict:
@@ -69,10 +69,14 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=None)
     parser.add_argument("--split", default="test")
     parser.add_argument("--out", default=None, help="JSON file of the per-sample rows")
+    parser.add_argument("--segmenter", default=None, help="weights (default: the shipped ones)")
+    parser.add_argument(
+        "--max-side", type=int, default=MAX_SIDE, help="segment at most this size, px"
+    )
     args = parser.parse_args()
     torch.set_num_threads(2)
     dataset = DropDataset(args.data, split=args.split, views=[0])
-    model = load_mask_segmenter()
+    model = load_mask_segmenter(args.segmenter)
     rows = []
     started = time.perf_counter()
     count = len(dataset) if args.limit is None else min(args.limit, len(dataset))
@@ -80,7 +84,7 @@ def main() -> None:
         item, meta = dataset[index], dataset.meta(index)
         frames, truth = item["frames"][0], dataset.masks(index)[0].float()
         tic = time.perf_counter()
-        masks = segment_clip(model, frames)
+        masks = segment_clip(model, frames, args.max_side)
         seconds = time.perf_counter() - tic
         median = ((frames - frames.median(0).values).norm(dim=-1) > 0.08).float()
         row = {
@@ -117,7 +121,8 @@ def main() -> None:
     print(
         f"\n{len(rows)} samples of {args.data} ({args.split}), view 0; "
         f"{platform.processor() or platform.machine()}, torch {torch.__version__}, "
-        f"{time.perf_counter() - started:.0f} s"
+        f"{time.perf_counter() - started:.0f} s; segmenter {args.segmenter or 'shipped'}, "
+        f"at most {args.max_side} px"
     )
     ious = np.array([r["iou_segmenter"] for r in rows])
     print(

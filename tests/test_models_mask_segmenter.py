@@ -20,6 +20,7 @@ from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import (
     MaskSegmenter,
     SegmenterConfig,
+    clip_logits,
     clip_references,
     frame_inputs,
     keep_main_blob,
@@ -28,6 +29,7 @@ from reconphys.models.mask_segmenter import (
 )
 from reconphys.pipeline.samples import segment_frames
 from reconphys.render.video import write_mp4
+from reconphys.train.masks import MaskTrainSettings, _batch, _Clip
 
 runner = CliRunner()
 REALISTIC = make_settings(
@@ -108,6 +110,20 @@ def test_shipped_segmenter_finds_the_object_in_a_realistic_scene(realistic_views
         assert not border_is_uniform(frames)  # the border-colour path cannot serve it
 
 
+def test_a_large_clip_is_segmented_at_the_networks_scale(realistic_views):
+    model = load_mask_segmenter()
+    frames, truth = realistic_views[0]  # 64 px
+    big = frames.repeat_interleave(2, 1).repeat_interleave(2, 2)  # the same clip at 128 px
+    logits = clip_logits(model, frames)
+    resampled = torch.nn.functional.interpolate(logits[:, None], size=(128, 128), mode="bilinear")
+    assert torch.allclose(clip_logits(model, big, max_side=64), resampled[:, 0], atol=1e-5)
+    assert not torch.allclose(clip_logits(model, big, max_side=128), resampled[:, 0], atol=0.1)
+    for frames, truth in realistic_views:  # at 192 px, above MAX_SIDE: 0.76, 0.91
+        big_truth = truth.repeat_interleave(3, 1).repeat_interleave(3, 2)
+        masks = segment_clip(model, frames.repeat_interleave(3, 1).repeat_interleave(3, 2))
+        assert masks.shape == big_truth.shape and iou(masks, big_truth) > 0.7
+
+
 def test_a_recording_without_masks_or_plate_goes_through_the_segmenter(realistic_views, tmp_path):
     frames, truth = realistic_views[0]
     video = tmp_path / "drop.mp4"
@@ -146,7 +162,7 @@ def test_train_masks_writes_a_loadable_model_and_refuses_plain_data(tmp_path):
     out = tmp_path / "run"
     command = ["train-masks", "--data", str(data), "--out", str(out), "--steps", "3"]
     command += ["--batch-size", "2", "--crop", "16", "--threads", "1", "--no-progress"]
-    result = runner.invoke(app, command)
+    result = runner.invoke(app, [*command, "--zoom", "0.5", "0.5"])
     assert result.exit_code == 0, result.output
     model = load_mask_segmenter(out)
     assert model(torch.zeros(1, 16, 24, 24)).shape == (1, 24, 24)
@@ -157,6 +173,27 @@ def test_train_masks_writes_a_loadable_model_and_refuses_plain_data(tmp_path):
     make_dataset(replace(REALISTIC, scene="plain", resolution=16, objects=1, test_objects=0), plain)
     result = runner.invoke(app, [*command[:2], str(plain), "--out", str(tmp_path / "run2")])
     assert result.exit_code != 0 and "stores no masks" in result.output
+    result = runner.invoke(app, [*command, "--zoom", "1.5", "0.8"])
+    assert result.exit_code != 0 and "--zoom" in result.output
+
+
+def test_a_zoomed_batch_is_the_clip_resampled():
+    frames = (torch.rand(4, 8, 8, 3) * 255).round().to(torch.uint8)
+    masks = torch.zeros(4, 8, 8, dtype=torch.bool)
+    masks[:, 2:6, 2:4] = True
+    clips = [_Clip(frames, clip_references(frames.float() / 255), masks)]
+    settings = MaskTrainSettings(data=(), out="", batch_size=3, crop=8, zoom=(0.5, 0.5))
+    inputs, targets = _batch(clips, np.random.default_rng(0), settings)
+    assert inputs.shape == (3, 16, 4, 4) and targets.shape == (3, 4, 4)
+    expected = torch.zeros(4, 4)
+    expected[1:3, 1] = 1.0  # the 4 × 2 box, 2 × 2 area-averaged
+    assert all(torch.equal(t, expected) or torch.equal(t, expected.flip(-1)) for t in targets)
+    pooled = torch.nn.functional.avg_pool2d(frames.permute(0, 3, 1, 2).float() / 255, 2)
+    for x in inputs[:, :3]:  # each is one frame, area-averaged (maybe mirrored)
+        assert any(
+            torch.allclose(x, p, atol=1e-6) or torch.allclose(x.flip(-1), p, atol=1e-6)
+            for p in pooled
+        )
 
 
 def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(

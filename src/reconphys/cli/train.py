@@ -137,6 +137,9 @@ def train_masks(
     crop: int = typer.Option(96, help="Training window, pixels per side."),
     lr: float = typer.Option(2e-3, help="Peak learning rate (cosine to 5 %)."),
     seed: int = typer.Option(0, help="Seed of the initialisation and the batches."),
+    zoom: tuple[float, float] = typer.Option(
+        (1.0, 1.0), help="Per step, frames resampled by a factor log-uniform in LO HI."
+    ),
     threads: int = typer.Option(2, help="CPU threads (torch)."),
     no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
 ):
@@ -150,6 +153,8 @@ def train_masks(
             raise InputError(f"must be ≥ 1, got {value}", field=name)
     if not (math.isfinite(lr) and lr > 0):
         raise InputError(f"must be a positive number, got {lr}", field="--lr")
+    if not (all(math.isfinite(z) and z > 0 for z in zoom) and zoom[0] <= zoom[1]):
+        raise InputError(f"must be 0 < LO ≤ HI, got {zoom[0]} {zoom[1]}", field="--zoom")
     for folder in data:
         if not folder.is_dir():
             raise InputError("dataset folder not found", source=str(folder))
@@ -161,6 +166,7 @@ def train_masks(
         crop=crop,
         lr=lr,
         seed=seed,
+        zoom=zoom,
     )
     set_cpu_threads(threads)
     path = train_mask_segmenter(settings, progress=not no_progress, log=typer.echo)

@@ -36,6 +36,7 @@ SHIPPED_MASKS_PATH = (
     Path(__file__).resolve().parent.parent / "weights" / "mask_segmenter.safetensors"
 )
 FRAMES_PER_CALL = 8  # bounds memory at large resolutions
+MAX_SIDE = 128  # px: a larger clip is segmented area-averaged down to this, the logits upsampled
 MAIN_BLOB_SHARE = 0.2  # regions smaller than this share of the largest are dropped
 
 
@@ -112,11 +113,23 @@ def frame_inputs(
 
 
 @torch.no_grad()
-def clip_logits(model: MaskSegmenter, frames: Tensor) -> Tensor:
-    """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera)."""
+def clip_logits(model: MaskSegmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
+    """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera).
+
+    The network saw 96-px clips: its receptive field spans an object there, not in a phone's
+    1080p frame. A clip whose longer side exceeds ``max_side`` is segmented area-averaged down
+    to it and the logits are resampled (bilinear) to the clip's size (docs/usage.md).
+    """
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
         raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
     frames = frames.float()
+    height, width = frames.shape[1:3]
+    if max(height, width) > max_side:
+        factor = max_side / max(height, width)
+        size = (max(1, round(height * factor)), max(1, round(width * factor)))
+        small = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
+        logits = clip_logits(model, small.permute(0, 2, 3, 1), max_side)
+        return F.interpolate(logits[:, None], size=(height, width), mode="bilinear")[:, 0]
     references = clip_references(frames)
     times = torch.linspace(0, 1, frames.shape[0])
     logits = []
@@ -126,10 +139,10 @@ def clip_logits(model: MaskSegmenter, frames: Tensor) -> Tensor:
     return torch.cat(logits)
 
 
-def segment_clip(model: MaskSegmenter, frames: Tensor) -> Tensor:
+def segment_clip(model: MaskSegmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
     """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera): logits
-    above 0, the main blob kept."""
-    return keep_main_blob(clip_logits(model, frames) > 0).float()
+    above 0 (of the clip at most ``max_side`` px, see clip_logits), the main blob kept."""
+    return keep_main_blob(clip_logits(model, frames, max_side) > 0).float()
 
 
 def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:

@@ -3,8 +3,10 @@ writing its masks beside a realistic dataset's frames (``reconphys segment-data`
 
 Examples are single frames of realistic-look datasets (``make-data --scene realistic``, which
 stores the true masks): every view of every training-split sample is a clip; a step draws
-``batch_size`` (clip, frame) pairs, a random ``crop``² window (smaller frames are used whole) and
-a horizontal mirror (never a vertical one: objects fall downwards), and minimises binary cross
+``batch_size`` (clip, frame) pairs, one zoom factor log-uniform in ``zoom`` (the step's frames
+resampled: area-averaged down, bilinear up, so the network sees objects at more pixel sizes than
+the data were rendered at), a random ``crop``² window (smaller frames are used whole) and a
+horizontal mirror (never a vertical one: objects fall downwards), and minimises binary cross
 entropy + soft Dice against the stored mask. The run writes ``OUT/model.safetensors`` +
 ``model.json``, ``OUT/log.jsonl``, and a checkpoint every ``checkpoint_every`` steps; running the
 same command again resumes it.
@@ -51,6 +53,7 @@ class MaskTrainSettings:
     lr: float = 2e-3  # peak (cosine to 5 %)
     seed: int = 0
     checkpoint_every: int = 500
+    zoom: tuple[float, float] = (1.0, 1.0)  # per step, log-uniform: frames resampled by it
 
 
 @dataclass
@@ -86,15 +89,26 @@ def load_clips(folders: tuple[str, ...], split: str = "train", progress: bool = 
     return clips
 
 
+def _zoomed(image: torch.Tensor, zoom: float) -> torch.Tensor:  # [C, H, W] → [C, h, w]
+    if zoom == 1.0:
+        return image
+    size = [max(1, round(n * zoom)) for n in image.shape[-2:]]
+    mode = "area" if zoom < 1 else "bilinear"
+    return F.interpolate(image[None], size=size, mode=mode)[0]
+
+
 def _batch(clips: list, rng: np.random.Generator, settings: MaskTrainSettings):
+    low, high = settings.zoom
+    zoom = float(np.exp(rng.uniform(np.log(low), np.log(high))))
     inputs, targets = [], []
     for _ in range(settings.batch_size):
         clip = clips[int(rng.integers(len(clips)))]
-        count, height, width = clip.masks.shape
+        count = clip.masks.shape[0]
         t = int(rng.integers(count))
         frame = clip.frames[t : t + 1].float() / 255
         x = frame_inputs(frame, clip.references, torch.tensor([t / (count - 1)]))[0]
-        y = clip.masks[t].float()
+        x, y = _zoomed(x, zoom), _zoomed(clip.masks[t : t + 1].float(), zoom)[0]
+        height, width = y.shape
         size_h, size_w = min(settings.crop, height), min(settings.crop, width)
         i, j = int(rng.integers(height - size_h + 1)), int(rng.integers(width - size_w + 1))
         x, y = x[:, i : i + size_h, j : j + size_w], y[i : i + size_h, j : j + size_w]
