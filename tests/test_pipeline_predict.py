@@ -21,6 +21,7 @@ from reconphys.capture import default_camera, load_observation
 from reconphys.capture.placement import estimate_linear_velocity, fit_to_mask
 from reconphys.capture.video import resample_indices, resample_times
 from reconphys.cli import app
+from reconphys.errors import InputError
 from reconphys.models.model_input import predictor_frames
 from reconphys.models.physics_predictor import resize_frames
 from reconphys.render import Cameras, render
@@ -201,6 +202,37 @@ def test_a_double_rate_video_is_resampled_to_frame_dt(bundle, tmp_path):
     resampled = load_observation(doubled, camera=bundle / "camera.json")
     assert resampled.num_frames == original.num_frames
     assert (resampled.frames - original.frames).abs().mean() < 0.02
+
+
+def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
+    assert resample_indices(100, 1 / 0.03, 0.03, start=0.3).tolist() == list(range(10, 100))
+    assert resample_indices(100, 1 / 0.03, 0.03, 0.3, end=0.9).tolist() == list(range(10, 31))
+    times = np.array([0.0, 0.03, 0.06, 0.12, 0.15])  # a GIF's display times, end 0.15 s
+    assert resample_times(times, 0.03, start=0.06).tolist() == [2, 2, 3]
+    with pytest.raises(InputError, match="after the recording's end"):
+        resample_indices(30, 1 / 0.03, 0.03, start=1.0)
+    # a recording that starts 0.3 s before the release (the object held still) reads, from
+    # --start 0.3, as the clip that starts at the release
+    frames = imageio.mimread(bundle / "video.mp4")
+    held = tmp_path / "held.mp4"
+    imageio.mimwrite(
+        held,
+        [frames[0]] * 10 + frames,
+        fps=1 / 0.03,
+        codec="libx264",
+        quality=10,
+        macro_block_size=1,
+    )
+    original = load_observation(bundle / "video.mp4", camera=bundle / "camera.json")
+    cut = load_observation(held, camera=bundle / "camera.json", start=0.3)
+    assert cut.num_frames == original.num_frames
+    assert (cut.frames - original.frames).abs().mean() < 0.01
+    early = load_observation(held, camera=bundle / "camera.json", start=0.15)
+    assert (early.frames[:30] - original.frames).abs().mean() > 0.01  # 5 frames off
+    result, out = _predict([held, "--start", "2", "--camera", bundle / "camera.json"], tmp_path)
+    assert result.exit_code == 2 and "--start" in result.output and not out.exists()
+    result, out = _predict([held, "--start", "0.3", "--end", "0.1"], tmp_path)
+    assert result.exit_code == 2 and "--end" in result.output and not out.exists()
 
 
 def test_transparent_gif_gives_the_masks(bundle, tmp_path):

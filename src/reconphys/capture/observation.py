@@ -8,8 +8,10 @@ INPUT is one of:
 A dataset sample (its stored frames, camera and truth) is read by
 :func:`reconphys.pipeline.samples.load_sample`; :func:`stored_observation` wraps its frames.
 
-Frames are resampled in time to ``frame_dt`` (nearest recorded frame), masked (background set
-to black, as in the synthetic renders the models were trained on) and kept at their size.
+Frames are resampled in time to ``frame_dt`` (nearest recorded frame) from ``start`` seconds into
+the recording (the release: frame 0; the frames before it are dropped) to ``end``, masked
+(background set to black, as in the synthetic renders the models were trained on) and kept at
+their size.
 """
 
 from __future__ import annotations
@@ -138,6 +140,8 @@ def load_observation(
     fov_deg: float | None = None,  # vertical field of view for the estimate (None: default)
     fps: float | None = None,  # frame rate of a frame folder / override of the file's
     frame_dt: float = 0.03,
+    start: float = 0.0,  # seconds into the recording: the release (frame 0); before it dropped
+    end: float | None = None,  # seconds into the recording: frames after it dropped
     segment: Callable[[Tensor], Tensor] | None = None,  # frames [T, H, W, 3] → masks [T, H, W]
 ) -> Observation:
     """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input."""
@@ -157,9 +161,10 @@ def load_observation(
             source=str(path),
         )
     if times is not None and fps is None:  # variable frame rate (GIF): the display times
-        picks = resample_times(times, frame_dt)
+        picks = resample_times(times, frame_dt, start, end)
     else:
-        picks = resample_indices(raw.shape[0], fps or recorded_fps or 1.0 / frame_dt, frame_dt)
+        rate = fps or recorded_fps or 1.0 / frame_dt
+        picks = resample_indices(raw.shape[0], rate, frame_dt, start, end)
     height, width = raw.shape[1:3]
     black = False  # the object on a black backdrop (the plain look): read from the border below
     if masks is not None:

@@ -97,12 +97,24 @@ def read_video(path: str | os.PathLike) -> tuple[np.ndarray, float | None, np.nd
     return np.stack(frames), fps, times
 
 
-def resample_times(times: np.ndarray, frame_dt: float) -> np.ndarray:
-    """Indices of the frames on screen at 0, frame_dt, 2·frame_dt, ... before the clip ends, for
-    frames that appear at ``times[:-1]`` and a clip that ends at ``times[-1]`` (seconds)."""
-    count = int(np.floor((times[-1] - 1e-9) / frame_dt)) + 1
-    targets = np.arange(count) * frame_dt
+def resample_times(
+    times: np.ndarray, frame_dt: float, start: float = 0.0, end: float | None = None
+) -> np.ndarray:
+    """Indices of the frames on screen at start, start + frame_dt, ... before the clip ends (or
+    ``end``, seconds), for frames that appear at ``times[:-1]`` and a clip that ends at
+    ``times[-1]`` (seconds)."""
+    stop = float(times[-1]) if end is None else min(end, float(times[-1]))
+    _check_span(start, stop - 1e-9)  # a frame must be on screen at the start
+    count = int(np.floor((stop - start - 1e-9) / frame_dt)) + 1
+    targets = start + np.arange(count) * frame_dt
     return np.searchsorted(times[:-1], targets + 1e-9, side="right") - 1
+
+
+def _check_span(start: float, stop: float) -> None:
+    if start > stop:
+        raise InputError(
+            f"{start:g} s is after the recording's end ({stop:.2f} s)", field="--start"
+        )
 
 
 def list_images(folder: str | os.PathLike) -> list[Path]:
@@ -152,12 +164,17 @@ def read_frame_folder(folder: str | os.PathLike) -> np.ndarray:
     return np.stack(frames)
 
 
-def resample_indices(num_frames: int, fps: float, frame_dt: float) -> np.ndarray:
-    """Indices of the recorded frames nearest to the times 0, frame_dt, 2·frame_dt, ... (as long
-    as they lie inside the recording); identity when ``fps == 1 / frame_dt``."""
+def resample_indices(
+    num_frames: int, fps: float, frame_dt: float, start: float = 0.0, end: float | None = None
+) -> np.ndarray:
+    """Indices of the recorded frames nearest to the times start, start + frame_dt, ... (seconds
+    into the recording, as long as they lie inside it and before ``end``); identity when
+    ``fps == 1 / frame_dt`` and ``start == 0``."""
     if not (np.isfinite(fps) and fps > 0):
         raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
     duration = (num_frames - 1) / fps
-    count = int(np.floor(duration / frame_dt + 1e-6)) + 1
-    times = np.arange(count) * frame_dt
+    stop = duration if end is None else min(end, duration)
+    _check_span(start, stop + 1e-9)
+    count = int(np.floor((stop - start) / frame_dt + 1e-6)) + 1
+    times = start + np.arange(count) * frame_dt
     return np.clip(np.round(times * fps).astype(np.int64), 0, num_frames - 1)

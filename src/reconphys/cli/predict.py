@@ -55,6 +55,10 @@ def predict_command(
         None, help="Vertical field of view, degrees, for the estimated camera (default 45)."
     ),
     fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
+    start: float = typer.Option(
+        0.0, help="Seconds into the recording where the object is released (frame 0)."
+    ),
+    end: float = typer.Option(None, help="Seconds into the recording to stop reading at."),
     sample: str = typer.Option(None, help="Dataset input: the sample id."),
     view: int = typer.Option(None, help="Dataset input: the view (default: the model's)."),
     model: Path = typer.Option(None, help="Physics predictor (default: the shipped model)."),
@@ -98,6 +102,10 @@ def predict_command(
     check_new_output(out, overwrite)
     if fps is not None and not (math.isfinite(fps) and fps > 0):
         raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
+    if not (math.isfinite(start) and start >= 0):
+        raise InputError(f"must be ≥ 0 seconds, got {start}", field="--start")
+    if end is not None and not (math.isfinite(end) and end > start):
+        raise InputError(f"must be after --start ({start:g} s), got {end}", field="--end")
     if anchors is not None and anchors < 4:
         raise InputError(f"must be ≥ 4, got {anchors}", field="--anchors")
     if fov is not None and not (math.isfinite(fov) and 1 <= fov <= 170):
@@ -116,6 +124,8 @@ def predict_command(
         camera=camera,
         fov=fov,
         fps=fps,
+        start=start,
+        end=end,
         sample=sample,
         view=view,
         model=model,

@@ -158,6 +158,8 @@ def predict(
     camera: str | os.PathLike | None = None,
     fov: float | None = None,
     fps: float | None = None,
+    start: float = 0.0,
+    end: float | None = None,
     sample: str | None = None,
     view: int | None = None,
     model: str | os.PathLike | None = None,
@@ -210,6 +212,8 @@ def predict(
         frame_dt=float(predictor.metadata["input"].get("frame_dt", 0.03)),
         sample=sample,
         view=predictor.view if view is None else view,
+        start=start,
+        end=end,
     )
     timings["decode"] = time.perf_counter() - started
     if model is None:  # the network for this recording's look (models/shipped.py)
@@ -232,6 +236,8 @@ def predict(
         "frames": observation.num_frames,
         "recorded_frames": observation.recorded_frames,
         "recorded_fps": observation.recorded_fps,
+        "start_s": start,
+        "end_s": end,
         "size": list(observation.size),
         "masks": observation.mask_source,
         "camera": observation.camera.source,

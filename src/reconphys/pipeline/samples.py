@@ -86,6 +86,8 @@ def load_input(
     fov_deg: float | None = None,  # vertical field of view when the camera is estimated
     sample: str | None = None,  # dataset input: the sample id
     view: int = 0,  # dataset input: the view
+    start: float = 0.0,  # seconds into a recording: its release (frame 0)
+    end: float | None = None,  # seconds into a recording: the frames after it are dropped
 ) -> tuple[Observation, SampleTruth | None]:
     """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
     and the sample's truth for a dataset input (None otherwise). Raises InputError."""
@@ -93,6 +95,10 @@ def load_input(
     if not path.exists():
         raise InputError("not found", source=str(path))
     if is_dataset(path):
+        if start != 0.0 or end is not None:
+            raise InputError(
+                "--start/--end are for recordings, not dataset samples", source=str(path)
+            )
         return load_sample(path, sample, view)
     if sample is not None:
         raise InputError("--sample is for dataset folders (with manifest.json)", source=str(path))
@@ -104,6 +110,8 @@ def load_input(
         fps=fps,
         frame_dt=frame_dt,
         fov_deg=fov_deg,
+        start=start,
+        end=end,
         segment=segment_frames,
     )
     return observation, None
