@@ -227,8 +227,11 @@ def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
     cut = load_observation(held, camera=bundle / "camera.json", start=0.3)
     assert cut.num_frames == original.num_frames
     assert (cut.frames - original.frames).abs().mean() < 0.01
-    early = load_observation(held, camera=bundle / "camera.json", start=0.15)
-    assert (early.frames[:30] - original.frames).abs().mean() > 0.01  # 5 frames off
+    # from the recording's start (or too early) the object is still for 11 (6) frames: refused,
+    # with the --start to give (two frames before it moves: 0.27 s; 0.3 s is the release)
+    for start, release in ((0.0, "0.27"), (0.15, "0.27")):
+        with pytest.raises(InputError, match=f"does not move.*about {release} here"):
+            load_observation(held, camera=bundle / "camera.json", start=start)
     result, out = _predict([held, "--start", "2", "--camera", bundle / "camera.json"], tmp_path)
     assert result.exit_code == 2 and "--start" in result.output and not out.exists()
     result, out = _predict([held, "--start", "0.3", "--end", "0.1"], tmp_path)
@@ -404,13 +407,16 @@ def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (
         (lambda t: _square(t), "does not move (every frame overlaps frame 0 by IoU ≥ 1.00)"),
         (lambda t: _square(t) if t < 3 else np.zeros((32, 32), np.uint8),
          "the object is found in only 3 of 30 frames"),
+        (lambda t: _square(t, top=min(4 + 2 * max(0, t - 7), 24)),  # held for 8 frames
+         "does not move in frames 0–7 (0.24 s): frame 0 must be the release; give --start SECONDS "
+         "(about 0.18 here"),
     ],
 )  # fmt: skip
 def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     """Masks that cannot be one released object (background, a static region, an object that is
-    not there) are refused with what to give instead, and no asset; a square that falls 2 px a
-    frame (then rests) passes the same checks."""
-    from reconphys.capture.masks import check_masks
+    not there, one held still before its release) are refused with what to give instead, and no
+    asset; a square that falls 2 px a frame (then rests) passes the same checks."""
+    from reconphys.capture.masks import check_masks, check_release
 
     frames = _frame_folder(bundle, tmp_path)
     masks = tmp_path / "masks"
@@ -420,9 +426,13 @@ def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     _fails([frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply"], tmp_path, expected)
     result, _ = _predict([frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply"],
                          tmp_path)  # fmt: skip
-    assert "--masks DIR (one image per frame) or a clean plate with --background" in result.output
+    if "--start" not in expected:  # masks that are wrong, not a recording that starts early
+        assert (
+            "--masks DIR (one image per frame) or a clean plate with --background" in result.output
+        )
     falling = np.stack([_square(t, top=min(2 * t, 24)) for t in range(30)]) / 255.0
     check_masks(torch.from_numpy(falling).float(), "falling")  # no error
+    check_release(torch.from_numpy(falling).float(), "falling")
 
 
 @pytest.mark.parametrize(

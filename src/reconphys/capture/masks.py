@@ -123,6 +123,11 @@ def read_background(path: str | os.PathLike, height: int, width: int) -> Tensor:
 MAX_AREA = 0.5  # of the frame, in frame 0: more is background (a floor, a wall), not one object
 STATIC_IOU = 0.8  # every frame's mask overlaps frame 0's at least this much: nothing fell
 MIN_FOUND = 0.5  # share of the frames with a non-empty mask
+# A released object's mask moves off frame 0's (IoU < STILL_IOU) by frame 3 at the latest (drops
+# from rest, 0.1–0.6 m objects, 32–512 px: measured on five datasets, docs/usage.md "The
+# input"); STILL_FRAMES or more frames that do not are an object held before its release.
+STILL_IOU = 0.95
+STILL_FRAMES = 5
 WHAT_TO_GIVE = (
     "give the object's masks with --masks DIR (one image per frame) or a clean plate with "
     "--background IMAGE"
@@ -173,3 +178,28 @@ def check_masks(masks: Tensor, source: str, first: int = 1) -> None:
                 f"{WHAT_TO_GIVE}",
                 source=source,
             )
+
+
+def still_frames(masks: Tensor) -> int:
+    """How many frames from frame 0 of masks [T, H, W] overlap frame 0's by IoU ≥ STILL_IOU
+    (frame 0 included): the object not yet moving."""
+    seen = masks.detach().reshape(masks.shape[0], -1) > 0.5
+    inter = (seen & seen[:1]).sum(1).float()
+    union = (seen | seen[:1]).sum(1).float().clamp_min(1)
+    moved = (inter / union < STILL_IOU).nonzero()
+    return int(moved[0]) if len(moved) else masks.shape[0]
+
+
+def check_release(masks: Tensor, source: str, start: float = 0.0, frame_dt: float = 0.03) -> None:
+    """Refuse a recording whose object stays still for STILL_FRAMES or more frames from frame 0
+    (frame 0 must be the release; the first 1–2 frames of a fall from rest move less than a
+    pixel), saying which ``--start`` would cut it there: about two frames before it moves."""
+    still = still_frames(masks)
+    if STILL_FRAMES <= still < masks.shape[0]:
+        release = start + max(0, still - 2) * frame_dt
+        raise InputError(
+            f"the object does not move in frames 0–{still - 1} ({still * frame_dt:.2f} s): frame "
+            f"0 must be the release; give --start SECONDS (about {release:.2f} here, the time "
+            "in the recording where it is let go)",
+            source=source,
+        )

@@ -33,6 +33,7 @@ from .masks import (
     backdrop_colour,
     border_is_uniform,
     check_masks,
+    check_release,
     read_background,
     read_mask_folder,
     subtract_background,
@@ -194,6 +195,7 @@ def load_observation(
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
             black = False
     check_masks(chosen, str(masks) if masks is not None else str(path))
+    check_release(chosen, str(path), start, frame_dt)
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where the object rests
         found = estimate_camera(chosen, frame_dt, fov_deg)
