@@ -29,17 +29,22 @@ import numpy as np
 import torch
 from common import mean_mask_iou
 
-from reconphys.capture.calibrate import DEFAULT_FOV_DEG, estimate_camera
+from reconphys.capture.calibrate import (
+    DEFAULT_FOV_DEG,
+    FALL_FIT_PX,
+    SEGMENTER_FALL_FIT_PX,
+    estimate_camera,
+)
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, segment_clip
 
 
-def camera_errors(masks, item, meta, fov_deg) -> dict:
+def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX) -> dict:
     K_true = item["K"][0].double()
     w2c_true = item["world_to_cam"][0].double()
     anchors = item["anchors"].double()  # [T, N_A, 3]
-    estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg)
+    estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg, fit_px)
     centre_cam = w2c_true[:3, :3] @ anchors[0].mean(0) + w2c_true[:3, 3]
     true_distance = float(centre_cam.norm())
     f_true, f_est = float(K_true[1, 1]), float(estimate.camera.K[1, 1])
@@ -95,13 +100,13 @@ def main() -> None:
             "segment_seconds": seconds,
         }
         fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(item["K"][0, 1, 1])))
-        for name, used, fov in (
-            ("true_masks_true_fov", truth, fov_true),
-            ("segmenter_true_fov", masks, fov_true),
-            ("segmenter_default_fov", masks, None),
+        for name, used, fov, fit_px in (
+            ("true_masks_true_fov", truth, fov_true, FALL_FIT_PX),
+            ("segmenter_true_fov", masks, fov_true, SEGMENTER_FALL_FIT_PX),
+            ("segmenter_default_fov", masks, None, SEGMENTER_FALL_FIT_PX),
         ):
             try:
-                row[name] = camera_errors(used, item, meta, fov)
+                row[name] = camera_errors(used, item, meta, fov, fit_px)
             except InputError as e:
                 row[name] = {"refused": str(e)}
         rows.append(row)

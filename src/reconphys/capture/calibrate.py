@@ -46,7 +46,11 @@ PITCH_PRIOR_DEG = 15.0  # filmed from a little above the drop
 PITCH_PRIOR_SPREAD_DEG = 30.0
 MIN_FALL_FRAMES = 4  # frames of free fall (three intervals: an acceleration and its check)
 LANDED_PIXELS = 1.0  # the bottom within this of its lowest: the object has landed
-FALL_FIT_PX = 0.5  # a parabola fits a free fall's centroid to this (plus 2 % of the radius)
+# A parabola fits a free fall's track to this many pixels (plus 2 % of the radius): exact masks
+# (a file's, a clean backdrop's) to half a pixel, the mask segmenter's to a pixel, the rim its
+# masks gain or lose. Chosen on validation drops (docs/usage.md#camera-and-ground-from-the-video).
+FALL_FIT_PX = 0.5
+SEGMENTER_FALL_FIT_PX = 1.0
 
 
 @dataclass
@@ -96,13 +100,13 @@ def mask_track(masks: Tensor) -> _Track:
     return _Track(*(np.array(x) for x in (centroid, bottom, width, area)))
 
 
-def fall_frames(track: _Track, frame_dt: float) -> int:
+def fall_frames(track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX) -> int:
     """How many frames from frame 0 the centroid (per image axis) and the bottom edge each follow
-    one parabola (free fall): the longest run whose fits stay within FALL_FIT_PX + 2 % of the
+    one parabola (free fall): the longest run whose fits stay within ``fit_px`` + 2 % of the
     object's radius (the bottom edge stops at contact while the centroid goes on as the object
     squashes), ending before the bottom first comes within LANDED_PIXELS of its lowest."""
     radius = math.sqrt(track.area[0] / math.pi)
-    tolerance = FALL_FIT_PX + 0.02 * radius
+    tolerance = fit_px + 0.02 * radius
     lowest = track.bottom.max()
     landed = int(np.nonzero(track.bottom >= lowest - LANDED_PIXELS)[0][0])
     count = min(3, landed)
@@ -190,8 +194,8 @@ def _fit_fall(
     return params, positions, rms
 
 
-def _free_fall_frames(track: _Track, frame_dt: float) -> int:
-    count = fall_frames(track, frame_dt)
+def _free_fall_frames(track: _Track, frame_dt: float, fit_px: float) -> int:
+    count = fall_frames(track, frame_dt, fit_px)
     if count < MIN_FALL_FRAMES:
         raise InputError(
             f"the object falls freely in {count} frame(s) (fewer than {MIN_FALL_FRAMES}): the "
@@ -205,12 +209,13 @@ def object_depth(
     masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
     frame_dt: float,  # seconds between frames
     camera: CameraSpec,  # a known camera (file or estimate)
+    fit_px: float = FALL_FIT_PX,  # the masks' pixel error: FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
 ) -> float:  # metres: the camera z of the object's centre in frame 0
     """How far the object is, from its free fall seen by a known camera: gravity's direction in
     the camera frame is the camera's, its size is known, so the fall's pixels give the depth
     (module doc, 1, with the pitch known). InputError when the video shows no free fall."""
     track = mask_track(masks)
-    count = _free_fall_frames(track, frame_dt)
+    count = _free_fall_frames(track, frame_dt, fit_px)
     rotation = camera.world_to_cam[:3, :3].double().numpy()
     gravity = rotation @ np.array([0.0, 0.0, -GRAVITY_MAGNITUDE])
     params, _, _ = _fit_fall(track, count, frame_dt, camera.K.double().numpy(), gravity)
@@ -221,6 +226,7 @@ def estimate_camera(
     masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
     frame_dt: float,  # seconds between frames
     fov_deg: float | None = None,  # vertical; None: DEFAULT_FOV_DEG
+    fit_px: float = FALL_FIT_PX,  # the masks' pixel error: FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
 ) -> CameraEstimate:
     """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
     fov = DEFAULT_FOV_DEG if fov_deg is None else float(fov_deg)
@@ -228,7 +234,7 @@ def estimate_camera(
     K = intrinsics_from_fov(fov, width_px, height_px, dtype=torch.float64)
     f, cx, cy = float(K[0, 0]), float(K[0, 2]), float(K[1, 2])
     track = mask_track(masks)
-    count = _free_fall_frames(track, frame_dt)
+    count = _free_fall_frames(track, frame_dt, fit_px)
     params, positions, rms = _fit_fall(track, count, frame_dt, K.numpy())
     pitch = float(params[6])
     # the ground: the object at rest (last frame) at the depth of its landing point

@@ -26,7 +26,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from .calibrate import estimate_camera
+from .calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX, estimate_camera
 from .camera import CameraSpec, default_camera, read_camera
 from .masks import (
     alpha_masks,
@@ -64,6 +64,7 @@ class Observation:
     camera_estimate: dict | None = None  # how the camera was read from the video (no file)
     black_backdrop: bool = False  # the object on black, as the plain look of our data
     recording: Tensor | None = None  # [T, H, W, 3] the frames before masking (None: = frames)
+    fall_fit_px: float = FALL_FIT_PX  # the masks' pixel error, for reading the fall (calibrate)
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -92,6 +93,7 @@ def stored_observation(
     source: str,
     masks: Tensor | None = None,  # [T, H, W] in {0, 1}; None: the black backdrop subtracted
     mask_source: str | None = None,
+    fall_fit_px: float = FALL_FIT_PX,  # the masks' pixel error (SEGMENTER_FALL_FIT_PX: segmented)
 ) -> Observation:
     """An observation of frames already in memory (a dataset view, ground z = 0): on a black
     backdrop, or with ``masks`` from elsewhere (a realistic scene), checked as any recording's."""
@@ -114,6 +116,7 @@ def stored_observation(
         mask_source=mask_source,
         recorded_frames=frames.shape[0],
         black_backdrop=black,
+        fall_fit_px=fall_fit_px,
     )
 
 
@@ -178,6 +181,7 @@ def load_observation(
         all_masks = None
         mask_source = ""
     recorded = raw.shape[0]
+    fit_px = FALL_FIT_PX
     raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3].astype(np.float32) / 255.0)
     if all_masks is not None:
@@ -194,11 +198,12 @@ def load_observation(
             chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
             black = False
+            fit_px = SEGMENTER_FALL_FIT_PX
     check_masks(chosen, str(masks) if masks is not None else str(path))
     check_release(chosen, str(path), start, frame_dt)
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where the object rests
-        found = estimate_camera(chosen, frame_dt, fov_deg)
+        found = estimate_camera(chosen, frame_dt, fov_deg, fit_px)
         spec, estimate = found.camera, found.to_json()
     elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
         spec = default_camera(width, height)
@@ -216,4 +221,5 @@ def load_observation(
         recorded_frames=recorded,
         camera_estimate=estimate,
         black_backdrop=black,
+        fall_fit_px=fit_px,
     )

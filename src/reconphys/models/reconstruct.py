@@ -84,7 +84,8 @@ def object_distance(observation: Observation) -> tuple[float, str]:
     where it rests on the camera's ground (the last frame's lowest object pixel). InputError
     when neither is there (no fall seen and the resting object not on the ground)."""
     try:
-        return object_depth(observation.masks, observation.frame_dt, observation.camera), "fall"
+        masks, dt, camera = observation.masks, observation.frame_dt, observation.camera
+        return object_depth(masks, dt, camera, observation.fall_fit_px), "fall"
     except InputError:
         pass
     last = observation.masks[-1] > 0.5

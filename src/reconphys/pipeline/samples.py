@@ -13,6 +13,7 @@ from torch import Tensor
 
 from ..assets.asset import Asset
 from ..capture import Observation, load_observation
+from ..capture.calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
 from ..capture.observation import stored_observation
 from ..errors import InputError
 from ..physics import ATTRIBUTES
@@ -53,9 +54,11 @@ def load_sample(
     item = dataset[index]
     frames = item["frames"][0].float()
     masks = mask_source = None
+    fit_px = FALL_FIT_PX
     if dataset.settings.scene == "realistic":  # as a recording: no stored mask is used
         masks = segment_frames(frames)
         mask_source = "mask segmenter (realistic scene)"
+        fit_px = SEGMENTER_FALL_FIT_PX
     observation = stored_observation(
         frames,
         item["K"][0],
@@ -64,6 +67,7 @@ def load_sample(
         f"{root} sample {sample} view {view} (stored frames)",
         masks=masks,
         mask_source=mask_source,
+        fall_fit_px=fit_px,
     )
     truth = SampleTruth(
         root=str(root),
