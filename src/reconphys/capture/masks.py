@@ -123,8 +123,8 @@ def read_background(path: str | os.PathLike, height: int, width: int) -> Tensor:
 MAX_AREA = 0.5  # of the frame, in frame 0: more is background (a floor, a wall), not one object
 STATIC_IOU = 0.8  # every frame's mask overlaps frame 0's at least this much: nothing fell
 MIN_FOUND = 0.5  # share of the frames with a non-empty mask
-# A released object's mask moves off frame 0's (IoU < STILL_IOU) by frame 3 at the latest (drops
-# from rest, 0.1–0.6 m objects, 32–512 px: measured on five datasets, docs/usage.md "The
+# A released object's mask moves off frame 0's (IoU < STILL_IOU) by frame 3 at the latest (drops,
+# tosses and drops from rest, 32–512 px: 286 clips of seven datasets, docs/usage.md "The
 # input"); STILL_FRAMES or more frames that do not are an object held before its release.
 STILL_IOU = 0.95
 STILL_FRAMES = 5
@@ -168,9 +168,7 @@ def check_masks(masks: Tensor, source: str, first: int = 1) -> None:
             source=source,
         )
     if masks.shape[0] >= 3:
-        inter = (seen & seen[:1]).sum(1).float()
-        union = (seen | seen[:1]).sum(1).float().clamp_min(1)
-        overlap = float((inter / union)[1:].min())
+        overlap = float(_overlap_with_first(masks)[1:].min())
         if overlap >= STATIC_IOU:
             raise InputError(
                 f"the masked region does not move (every frame overlaps frame 0 by IoU ≥ "
@@ -180,13 +178,16 @@ def check_masks(masks: Tensor, source: str, first: int = 1) -> None:
             )
 
 
+def _overlap_with_first(masks: Tensor) -> Tensor:  # [T, H, W] → [T] IoU with frame 0's mask
+    seen = masks.detach().reshape(masks.shape[0], -1) > 0.5
+    inter = (seen & seen[:1]).sum(1).float()
+    return inter / (seen | seen[:1]).sum(1).float().clamp_min(1)
+
+
 def still_frames(masks: Tensor) -> int:
     """How many frames from frame 0 of masks [T, H, W] overlap frame 0's by IoU ≥ STILL_IOU
     (frame 0 included): the object not yet moving."""
-    seen = masks.detach().reshape(masks.shape[0], -1) > 0.5
-    inter = (seen & seen[:1]).sum(1).float()
-    union = (seen | seen[:1]).sum(1).float().clamp_min(1)
-    moved = (inter / union < STILL_IOU).nonzero()
+    moved = (_overlap_with_first(masks) < STILL_IOU).nonzero()
     return int(moved[0]) if len(moved) else masks.shape[0]
 
 

@@ -98,8 +98,8 @@ def _zoomed(image: torch.Tensor, zoom: float) -> torch.Tensor:  # [C, H, W] → 
 
 
 def _batch(clips: list, rng: np.random.Generator, settings: MaskTrainSettings):
-    low, high = settings.zoom
-    zoom = float(np.exp(rng.uniform(np.log(low), np.log(high))))
+    low, high = settings.zoom  # drawn only when it varies: the default recipe's batches as before
+    zoom = float(np.exp(rng.uniform(np.log(low), np.log(high)))) if low < high else low
     inputs, targets = [], []
     for _ in range(settings.batch_size):
         clip = clips[int(rng.integers(len(clips)))]
