@@ -7,7 +7,9 @@ taken as a user's recording (frames only):
 - masks: the mask segmenter's IoU with the stored true masks (mean over frames), beside the
   temporal-median background subtraction;
 - camera and ground (capture/calibrate.py), from the segmenter's masks and from the true masks,
-  with the vertical field of view known (a camera file without pose) or assumed (the default):
+  with the vertical field of view known (a camera file without pose) or assumed (the default),
+  the ground as predict reads it (exact masks: from the first touch; the segmenter's: from the
+  rest) and, for the record, the segmenter's with the touch:
   scale error = the object's metric size read from the video / the truth − 1 (from the distance
   and the focal length: size = pixels · distance / f); ground error = the drop height read from
   the video − the true one (the height above the estimated ground of the object's true lowest
@@ -40,11 +42,11 @@ from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, segment_clip
 
 
-def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX) -> dict:
+def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True) -> dict:
     K_true = item["K"][0].double()
     w2c_true = item["world_to_cam"][0].double()
     anchors = item["anchors"].double()  # [T, N_A, 3]
-    estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg, fit_px)
+    estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg, fit_px, touch)
     centre_cam = w2c_true[:3, :3] @ anchors[0].mean(0) + w2c_true[:3, 3]
     true_distance = float(centre_cam.norm())
     f_true, f_est = float(K_true[1, 1]), float(estimate.camera.K[1, 1])
@@ -65,6 +67,7 @@ def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX) -> dict:
         "ground_error_m": float(point_world[2]) - float(lowest[2]),
         "pitch_deg": estimate.pitch_deg,
         "fall_frames": estimate.fall_frames,
+        "contact_s": estimate.contact_s,
     }
 
 
@@ -100,13 +103,16 @@ def main() -> None:
             "segment_seconds": seconds,
         }
         fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(item["K"][0, 1, 1])))
-        for name, used, fov, fit_px in (
-            ("true_masks_true_fov", truth, fov_true, FALL_FIT_PX),
-            ("segmenter_true_fov", masks, fov_true, SEGMENTER_FALL_FIT_PX),
-            ("segmenter_default_fov", masks, None, SEGMENTER_FALL_FIT_PX),
+        # as predict reads them: exact masks' ground from the first touch, the segmenter's from
+        # the rest; the last row is the segmenter's masks with the touch (measured, not used)
+        for name, used, fov, fit_px, touch in (
+            ("true_masks_true_fov", truth, fov_true, FALL_FIT_PX, True),
+            ("segmenter_true_fov", masks, fov_true, SEGMENTER_FALL_FIT_PX, False),
+            ("segmenter_default_fov", masks, None, SEGMENTER_FALL_FIT_PX, False),
+            ("segmenter_default_fov_touch", masks, None, SEGMENTER_FALL_FIT_PX, True),
         ):
             try:
-                row[name] = camera_errors(used, item, meta, fov, fit_px)
+                row[name] = camera_errors(used, item, meta, fov, fit_px, touch)
             except InputError as e:
                 row[name] = {"refused": str(e)}
         rows.append(row)
@@ -135,7 +141,12 @@ def main() -> None:
         f"{ious.min():.3f}), temporal median {np.mean([r['iou_median'] for r in rows]):.3f}; "
         f"segmenter {np.mean([r['segment_seconds'] for r in rows]):.2f} s a clip"
     )
-    for name in ("true_masks_true_fov", "segmenter_true_fov", "segmenter_default_fov"):
+    for name in (
+        "true_masks_true_fov",
+        "segmenter_true_fov",
+        "segmenter_default_fov",
+        "segmenter_default_fov_touch",
+    ):
         good = [r[name] for r in rows if "scale_error" in r[name]]
         refused = len(rows) - len(good)
         if not good:

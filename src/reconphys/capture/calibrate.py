@@ -12,11 +12,16 @@ user's ``--fov``), and an object that falls freely for a few frames before it la
    (:data:`PITCH_PRIOR_DEG` ± :data:`PITCH_PRIOR_SPREAD_DEG`) keeps what the fall does not show.
    A wrong focal length scales the distance, not the object: the size and the motion in metres
    follow from gravity and the pixels alone.
-2. **Ground from where the object rests.** In the last frame the object lies on the ground, at
-   about the depth where the fall lands. Its lowest silhouette point is on the ground (the near
-   bottom edge of a convex object; a ball's is r·(1 − cos θ) above it) and nearer than its
-   centre by about its half-depth (taken as the mask's half-width) seen at cos θ: the ground
-   passes through that point.
+2. **Ground from the first touch.** The centroid leaves the free fall's path when the object
+   touches the ground, as ``−c·(t − t_c)²`` while the ground's push builds (:func:`contact_time`
+   fits t_c between frames). The centre's position at t_c (the fall's fit, metres) plus the
+   object's extent below its centre (frame 0's silhouette, from the centroid down to its bottom
+   edge) puts the ground: the lowest point is on it at the touch. Without a clear touch (a clip
+   that ends first, a fall cut short by mask errors), or with ``ground_from_touch=False`` (the
+   mask segmenter's masks, whose centroid near the touch was not read reliably), the ground is
+   read from where the object rests: in the last frame its lowest silhouette point is on (a
+   box's near bottom edge) or just above (a ball's) the ground, nearer than its centre by about
+   its half-depth (taken as the mask's half-width).
 3. **The world frame** follows the dataset's conventions (z up, ground z = 0): the camera on the
    +x side looking towards −x, pitched down by θ, and the object's frame-0 centre above the origin.
 
@@ -51,6 +56,12 @@ LANDED_PIXELS = 1.0  # the bottom within this of its lowest: the object has land
 # masks gain or lose. Chosen on validation drops (docs/usage.md#camera-and-ground-from-the-video).
 FALL_FIT_PX = 0.5
 SEGMENTER_FALL_FIT_PX = 1.0
+# The touch is fitted to the centroid over the fall's last 3 frames and this many after it, and
+# taken when the fitted push has moved the centroid at least CONTACT_MIN_PX by then (a fall cut
+# short by mask errors leaves a drift, not a touch: the ground is then read from the rest).
+# Both chosen on validation drops (docs/usage.md#camera-and-ground-from-the-video)
+CONTACT_FRAMES_AFTER = 2
+CONTACT_MIN_PX = 2.0
 
 
 @dataclass
@@ -64,6 +75,7 @@ class CameraEstimate:
     distance: float  # camera to the object's centre at frame 0, metres
     fall_frames: int  # frames of free fall fitted
     residual_px: float  # RMS of the fall's centroid fit, pixels
+    contact_s: float | None = None  # first touch of the ground (None: ground from the rest)
 
     def to_json(self) -> dict:
         return {
@@ -74,6 +86,9 @@ class CameraEstimate:
             "distance_m": round(self.distance, 4),
             "fall_frames": self.fall_frames,
             "fall_fit_rms_px": round(self.residual_px, 3),
+            "ground_from": "where the object rests"
+            if self.contact_s is None
+            else f"the first touch of the ground, {self.contact_s:.3f} s",
         }
 
 
@@ -120,6 +135,35 @@ def fall_frames(track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX) -> 
             break
         count = n
     return count
+
+
+def contact_time(
+    track: _Track,
+    count: int,  # frames of free fall
+    frame_dt: float,
+    falling: np.ndarray,  # [T] px: the fall's model of the centroid's image height, every frame
+) -> float | None:
+    """Seconds from frame 0 to the object's first touch of the ground, between frames: the
+    centroid's image height minus the free fall's (``falling``, the fall's fit carried on) is
+    modelled as ``−c·max(t − t_c, 0)²`` (a push that builds as the object squashes) over the
+    fall's last 3 frames and :data:`CONTACT_FRAMES_AFTER` after it; least squares, c ≥ 0 in
+    closed form, t_c on a grid from 3 frames before the fall's end to 1 after it. None when the
+    clip ends before it shows the touch, or when the fitted push moves the centroid less than
+    :data:`CONTACT_MIN_PX` by the window's last frame (a drift of a badly read fall)."""
+    frames = len(track.area)
+    if frames < count + CONTACT_FRAMES_AFTER:
+        return None
+    used = np.arange(max(0, count - 3), min(frames, count + CONTACT_FRAMES_AFTER + 1))
+    times = used * frame_dt
+    residual = track.centroid[used, 1] - falling[used]  # [F] px, ≤ 0 once the ground pushes
+    candidates = np.linspace((count - 3) * frame_dt, (count + 1) * frame_dt, 161)
+    after = np.clip(times[None, :] - candidates[:, None], 0.0, None) ** 2  # [C, F]
+    c = np.clip(-(after @ residual) / np.maximum((after**2).sum(1), 1e-12), 0.0, None)
+    errors = ((residual[None, :] + c[:, None] * after) ** 2).sum(1)
+    best = int(np.argmin(errors))
+    if c[best] * after[best, -1] < CONTACT_MIN_PX:
+        return None
+    return float(candidates[best])
 
 
 def _world_to_cam(pitch: float, height: float) -> Tensor:
@@ -227,6 +271,7 @@ def estimate_camera(
     frame_dt: float,  # seconds between frames
     fov_deg: float | None = None,  # vertical; None: DEFAULT_FOV_DEG
     fit_px: float = FALL_FIT_PX,  # the masks' pixel error: FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
+    ground_from_touch: bool = True,  # False: from the rest only (the segmenter's masks)
 ) -> CameraEstimate:
     """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
     fov = DEFAULT_FOV_DEG if fov_deg is None else float(fov_deg)
@@ -237,18 +282,27 @@ def estimate_camera(
     count = _free_fall_frames(track, frame_dt, fit_px)
     params, positions, rms = _fit_fall(track, count, frame_dt, K.numpy())
     pitch = float(params[6])
-    # the ground: the object at rest (last frame) at the depth of its landing point
-    landing = positions(params, np.array([count * frame_dt]))[0]
-    depth = float(landing[2])
-    # the lowest silhouette point of a resting object is on (a box's near bottom edge) or just
-    # above (a ball: r·(1 − cos θ)) the ground, nearer than its centre by about its half-depth
-    # (taken as the mask's half-width) seen at cos θ: a box's is, a ball's is not. On the
-    # videos above the drop height's mean error is 5.4 cm with it, 8.6 cm without it
-    half_width = 0.5 * track.width[-1] * depth / f
-    near = depth - half_width * math.cos(pitch)
-    lowest = near * np.array([(track.centroid[-1, 0] - cx) / f, (track.bottom[-1] - cy) / f, 1.0])
     down = np.array([0.0, math.cos(pitch), math.sin(pitch)])  # world down in the camera frame
-    camera_height = float(lowest @ down)
+    contact = None
+    if ground_from_touch:
+        path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
+        contact = contact_time(track, count, frame_dt, f * path[:, 1] / path[:, 2] + cy)
+    if contact is not None:
+        # the ground (module doc, 2): the centre at the touch plus the object's extent below
+        # its centre (frame 0's silhouette at frame 0's depth)
+        at_contact = positions(params, np.array([contact]))[0]
+        below = (track.bottom[0] - track.centroid[0, 1]) * float(params[2]) / f
+        camera_height = float(at_contact @ down) + below
+    else:
+        # the object at rest (last frame) at the depth of its landing point; its lowest
+        # silhouette point is on (a box's near bottom edge) or just above (a ball's) the ground,
+        # nearer than its centre by about its half-depth (the mask's half-width) seen at cos θ
+        landing = positions(params, np.array([count * frame_dt]))[0]
+        depth = float(landing[2])
+        half_width = 0.5 * track.width[-1] * depth / f
+        near = depth - half_width * math.cos(pitch)
+        bottom = np.array([(track.centroid[-1, 0] - cx) / f, (track.bottom[-1] - cy) / f, 1.0])
+        camera_height = float(near * bottom @ down)
     if not camera_height > 0:
         raise InputError(
             f"the ground read from the video is above the camera ({camera_height:.2f} m): the "
@@ -271,4 +325,5 @@ def estimate_camera(
         distance=float(np.linalg.norm(params[:3])),
         fall_frames=count,
         residual_px=rms,
+        contact_s=contact,
     )
