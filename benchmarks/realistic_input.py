@@ -8,8 +8,8 @@ taken as a user's recording (frames only):
   temporal-median background subtraction;
 - camera and ground (capture/calibrate.py), from the segmenter's masks and from the true masks,
   with the vertical field of view known (a camera file without pose) or assumed (the default),
-  the ground as predict reads it (exact masks: from the first touch; the segmenter's: from the
-  rest) and, for the record, the segmenter's with the touch:
+  the ground as predict reads it (from the first touch, else where the object rests) and, for
+  the record, from the rest alone:
   scale error = the object's metric size read from the video / the truth − 1 (from the distance
   and the focal length: size = pixels · distance / f); ground error = the drop height read from
   the video − the true one (the height above the estimated ground of the object's true lowest
@@ -103,13 +103,13 @@ def main() -> None:
             "segment_seconds": seconds,
         }
         fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(item["K"][0, 1, 1])))
-        # as predict reads them: exact masks' ground from the first touch, the segmenter's from
-        # the rest; the last row is the segmenter's masks with the touch (measured, not used)
+        # as predict reads them (the ground from the first touch, else the rest); the last row
+        # is the ground from the rest alone, the rule before the touch (for the record)
         for name, used, fov, fit_px, touch in (
             ("true_masks_true_fov", truth, fov_true, FALL_FIT_PX, True),
-            ("segmenter_true_fov", masks, fov_true, SEGMENTER_FALL_FIT_PX, False),
-            ("segmenter_default_fov", masks, None, SEGMENTER_FALL_FIT_PX, False),
-            ("segmenter_default_fov_touch", masks, None, SEGMENTER_FALL_FIT_PX, True),
+            ("segmenter_true_fov", masks, fov_true, SEGMENTER_FALL_FIT_PX, True),
+            ("segmenter_default_fov", masks, None, SEGMENTER_FALL_FIT_PX, True),
+            ("segmenter_default_fov_rest", masks, None, SEGMENTER_FALL_FIT_PX, False),
         ):
             try:
                 row[name] = camera_errors(used, item, meta, fov, fit_px, touch)
@@ -145,7 +145,7 @@ def main() -> None:
         "true_masks_true_fov",
         "segmenter_true_fov",
         "segmenter_default_fov",
-        "segmenter_default_fov_touch",
+        "segmenter_default_fov_rest",
     ):
         good = [r[name] for r in rows if "scale_error" in r[name]]
         refused = len(rows) - len(good)

@@ -7,7 +7,10 @@ For view 0 of the first N test samples of a realistic dataset, the sample is wri
 
 - `true_geometry`: the mp4 + camera.json + the true Gaussians († an upper bound),
 - `camera_file`: the mp4 + camera.json (the 3DGS predictor's geometry),
-- `mp4_only`: the mp4 alone (camera estimated from the video).
+- `mp4_only`: the mp4 alone (camera estimated from the video),
+- `masks_dir` (not in the default set): the mp4 + the true masks as `--masks DIR` (a
+  segmentation tool's masks at their best; camera estimated from the video, its ground from
+  the first touch).
 
 Printed: MAE of log k/m, log d/m and friction against the truth, beside the trivial predictor
 (the attribute ranges' midpoints, the medians of a uniform training distribution), their ratios,
@@ -48,10 +51,11 @@ from reconphys.eval.metrics import psnr
 from reconphys.physics import ATTRIBUTE_RANGES
 from reconphys.pipeline.demo import true_observables
 from reconphys.pipeline.preview import simulate_and_render
+from reconphys.render.video import write_image
 
 FUTURE = slice(20, 30)  # evaluate's future window (frames 20–29)
 
-CONFIGS = ("true_geometry", "camera_file", "mp4_only")
+CONFIGS = ("true_geometry", "camera_file", "mp4_only")  # the default set; also: masks_dir
 
 
 def observables(attributes: dict) -> np.ndarray:  # [3] log k/m, log d/m, friction
@@ -88,6 +92,13 @@ def main() -> None:
             write_ply(bundle / "gaussians.ply", dataset.asset(index).gaussians)
             truth = observables(meta["attributes"])
             masks = dataset.masks(index)[0]  # [T, H, W] bool, view 0
+            if "masks_dir" in configs:
+                (bundle / "masks").mkdir()
+                for t, mask in enumerate(masks.numpy()):
+                    write_image(
+                        bundle / "masks" / f"{t:04d}.png",
+                        mask.astype(np.uint8)[..., None].repeat(3, -1) * 255,
+                    )
             target = item["frames"][0] * masks[..., None]
 
             def future_psnr(asset, observation, masks=masks, target=target) -> float:
@@ -100,8 +111,10 @@ def main() -> None:
             row = {"id": meta["id"], "truth": truth.tolist()}
             for config in configs:
                 kwargs = {}
-                if config != "mp4_only":
+                if config not in ("mp4_only", "masks_dir"):
                     kwargs["camera"] = bundle / "camera.json"
+                if config == "masks_dir":
+                    kwargs["masks"] = bundle / "masks"
                 if config == "true_geometry":
                     kwargs["gaussians"] = bundle / "gaussians.ply"
                 tic = time.perf_counter()

@@ -191,3 +191,29 @@ def test_a_pixel_of_mask_noise_needs_the_segmenters_tolerance():
     assert np.mean(frames[loose]) >= np.mean(frames[tight]) + 2
     assert np.mean(errors[loose]) < 0.5 * np.mean(errors[tight])
     assert exact.fall_frames >= np.mean(frames[loose]) - 1  # not past the landing
+
+
+@pytest.mark.parametrize("braking_g, found", [(5.0, True), (0.5, False)])
+def test_a_touch_must_brake_the_fall_by_at_least_g(braking_g, found):
+    """The centroid leaving the fall's path as −c·(t − t_c)²: found to the grid's step when it
+    brakes like a landing (5 g); a slow drift (0.5 g, a fall misread) is not taken for a touch,
+    though it moves the centroid by more than CONTACT_MIN_PX."""
+    from reconphys.capture.calibrate import CONTACT_MIN_PX, _Track, contact_time
+
+    dt, count, frames, touch = 0.03, 10, 16, 9.4 * 0.03
+    metres_per_px = 0.005
+    c = braking_g * G / (2 * metres_per_px)  # px/s²
+    t = np.arange(frames) * dt
+    height = -c * np.clip(t - touch, 0, None) ** 2
+    track = _Track(
+        centroid=np.stack([np.zeros(frames), height], 1),
+        bottom=np.zeros(frames),
+        width=np.ones(frames),
+        area=np.ones(frames),
+    )
+    assert -height[count + 2] > CONTACT_MIN_PX
+    read = contact_time(track, count, dt, np.zeros(frames), metres_per_px)
+    if found:
+        assert read == pytest.approx(touch, abs=0.001)
+    else:
+        assert read is None

@@ -17,11 +17,10 @@ user's ``--fov``), and an object that falls freely for a few frames before it la
    fits t_c between frames). The centre's position at t_c (the fall's fit, metres) plus the
    object's extent below its centre (frame 0's silhouette, from the centroid down to its bottom
    edge) puts the ground: the lowest point is on it at the touch. Without a clear touch (a clip
-   that ends first, a fall cut short by mask errors), or with ``ground_from_touch=False`` (the
-   mask segmenter's masks, whose centroid near the touch was not read reliably), the ground is
-   read from where the object rests: in the last frame its lowest silhouette point is on (a
-   box's near bottom edge) or just above (a ball's) the ground, nearer than its centre by about
-   its half-depth (taken as the mask's half-width).
+   that ends first, a fall cut short by mask errors), or with ``ground_from_touch=False``, the
+   ground is read from where the object rests: in the last frame its lowest silhouette point
+   is on (a box's near bottom edge) or just above (a ball's) the ground, nearer than its centre
+   by about its half-depth (taken as the mask's half-width).
 3. **The world frame** follows the dataset's conventions (z up, ground z = 0): the camera on the
    +x side looking towards −x, pitched down by θ, and the object's frame-0 centre above the origin.
 
@@ -57,11 +56,13 @@ LANDED_PIXELS = 1.0  # the bottom within this of its lowest: the object has land
 FALL_FIT_PX = 0.5
 SEGMENTER_FALL_FIT_PX = 1.0
 # The touch is fitted to the centroid over the fall's last 3 frames and this many after it, and
-# taken when the fitted push has moved the centroid at least CONTACT_MIN_PX by then (a fall cut
-# short by mask errors leaves a drift, not a touch: the ground is then read from the rest).
-# Both chosen on validation drops (docs/usage.md#camera-and-ground-from-the-video)
+# taken when the fitted push has moved the centroid at least CONTACT_MIN_PX by then and brakes
+# it by at least CONTACT_MIN_G·g (the ground stops a fall; a fall cut short by mask errors
+# leaves a slow drift, not a touch: the ground is then read from the rest). All chosen on
+# validation drops (docs/usage.md#the-ground-from-the-first-touch-2026-11-26-third-session)
 CONTACT_FRAMES_AFTER = 2
 CONTACT_MIN_PX = 2.0
+CONTACT_MIN_G = 1.0
 
 
 @dataclass
@@ -142,6 +143,7 @@ def contact_time(
     count: int,  # frames of free fall
     frame_dt: float,
     falling: np.ndarray,  # [T] px: the fall's model of the centroid's image height, every frame
+    metres_per_px: float,  # at the object's depth (its distance / the focal length in pixels)
 ) -> float | None:
     """Seconds from frame 0 to the object's first touch of the ground, between frames: the
     centroid's image height minus the free fall's (``falling``, the fall's fit carried on) is
@@ -149,7 +151,8 @@ def contact_time(
     fall's last 3 frames and :data:`CONTACT_FRAMES_AFTER` after it; least squares, c ≥ 0 in
     closed form, t_c on a grid from 3 frames before the fall's end to 1 after it. None when the
     clip ends before it shows the touch, or when the fitted push moves the centroid less than
-    :data:`CONTACT_MIN_PX` by the window's last frame (a drift of a badly read fall)."""
+    :data:`CONTACT_MIN_PX` by the window's last frame or brakes it by less than
+    :data:`CONTACT_MIN_G`·g (2c px/s² × ``metres_per_px``): a drift of a badly read fall."""
     frames = len(track.area)
     if frames < count + CONTACT_FRAMES_AFTER:
         return None
@@ -161,7 +164,8 @@ def contact_time(
     c = np.clip(-(after @ residual) / np.maximum((after**2).sum(1), 1e-12), 0.0, None)
     errors = ((residual[None, :] + c[:, None] * after) ** 2).sum(1)
     best = int(np.argmin(errors))
-    if c[best] * after[best, -1] < CONTACT_MIN_PX:
+    braking = 2.0 * c[best] * metres_per_px  # m/s²
+    if c[best] * after[best, -1] < CONTACT_MIN_PX or braking < CONTACT_MIN_G * GRAVITY_MAGNITUDE:
         return None
     return float(candidates[best])
 
@@ -271,7 +275,7 @@ def estimate_camera(
     frame_dt: float,  # seconds between frames
     fov_deg: float | None = None,  # vertical; None: DEFAULT_FOV_DEG
     fit_px: float = FALL_FIT_PX,  # the masks' pixel error: FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
-    ground_from_touch: bool = True,  # False: from the rest only (the segmenter's masks)
+    ground_from_touch: bool = True,  # False: from the rest only (the rule before the touch)
 ) -> CameraEstimate:
     """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
     fov = DEFAULT_FOV_DEG if fov_deg is None else float(fov_deg)
@@ -286,7 +290,8 @@ def estimate_camera(
     contact = None
     if ground_from_touch:
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
-        contact = contact_time(track, count, frame_dt, f * path[:, 1] / path[:, 2] + cy)
+        falling = f * path[:, 1] / path[:, 2] + cy
+        contact = contact_time(track, count, frame_dt, falling, float(params[2]) / f)
     if contact is not None:
         # the ground (module doc, 2): the centre at the touch plus the object's extent below
         # its centre (frame 0's silhouette at frame 0's depth)

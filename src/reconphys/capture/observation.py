@@ -203,10 +203,7 @@ def load_observation(
     check_release(chosen, str(path), start, frame_dt)
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where it touches or rests
-        # the segmenter's masks read the touch less reliably: their ground is from the rest
-        # (docs/usage.md#camera-and-ground-from-the-video)
-        segmented = fit_px == SEGMENTER_FALL_FIT_PX
-        found = estimate_camera(chosen, frame_dt, fov_deg, fit_px, ground_from_touch=not segmented)
+        found = estimate_camera(chosen, frame_dt, fov_deg, fit_px)
         spec, estimate = found.camera, found.to_json()
     elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
         spec = default_camera(width, height)
