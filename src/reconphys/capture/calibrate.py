@@ -80,7 +80,7 @@ class CameraEstimate:
 
     def to_json(self) -> dict:
         return {
-            "source": "estimated from the video (gravity and where the object rests)",
+            "source": "estimated from the video (gravity, and where the object lands)",
             "fov_deg": self.fov_deg,
             "pitch_deg": round(self.pitch_deg, 3),
             "camera_height_m": round(self.height, 4),
