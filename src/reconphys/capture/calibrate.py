@@ -287,16 +287,17 @@ def estimate_camera(
     params, positions, rms = _fit_fall(track, count, frame_dt, K.numpy())
     pitch = float(params[6])
     down = np.array([0.0, math.cos(pitch), math.sin(pitch)])  # world down in the camera frame
+    metres_per_px = float(params[2]) / f  # at the object's frame-0 depth
     contact = None
     if ground_from_touch:
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
         falling = f * path[:, 1] / path[:, 2] + cy
-        contact = contact_time(track, count, frame_dt, falling, float(params[2]) / f)
+        contact = contact_time(track, count, frame_dt, falling, metres_per_px)
     if contact is not None:
         # the ground (module doc, 2): the centre at the touch plus the object's extent below
         # its centre (frame 0's silhouette at frame 0's depth)
         at_contact = positions(params, np.array([contact]))[0]
-        below = (track.bottom[0] - track.centroid[0, 1]) * float(params[2]) / f
+        below = (track.bottom[0] - track.centroid[0, 1]) * metres_per_px
         camera_height = float(at_contact @ down) + below
     else:
         # the object at rest (last frame) at the depth of its landing point; its lowest
