@@ -32,9 +32,9 @@ from PIL import Image, ImageDraw
 from reconphys.data.dataset import DropDataset
 from reconphys.data.storage import read_manifest
 from reconphys.eval.plots import COLOURS, Axes
+from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
 from reconphys.models.shipped import load_predictor
 from reconphys.physics import ATTRIBUTES
-from reconphys.pipeline.samples import segment_frames
 from reconphys.pipeline.search import observables
 from reconphys.threads import set_cpu_threads
 
@@ -64,6 +64,14 @@ def main() -> None:
         default=0,
         help="only the samples of the split's objects after its first N (a validation split)",
     )
+    parser.add_argument("--segmenter", default=None, help="weights (default: the shipped ones)")
+    parser.add_argument(
+        "--objects-of",
+        type=Path,
+        default=None,
+        help="with --after-objects: the first N objects are this dataset's training split's "
+        "(by mesh), e.g. a validation split of meshes a model of several folders never saw",
+    )
     parser.add_argument(
         "--trivial-from",
         type=Path,
@@ -72,6 +80,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     set_cpu_threads(args.threads)
+    segmenter = load_mask_segmenter(args.segmenter) if args.masks == "segmenter" else None
     manifest = read_manifest(args.data)
     train = [s for s in manifest["samples"] if s["split"] == "train"]
     truth_of = {}
@@ -80,12 +89,14 @@ def main() -> None:
         launch = meta["initial_state"].get("launch", "drop")
         truth_of[s["id"]] = (observables_of(meta["attributes"]), launch)
     source = args.trivial_from or args.data
-    if args.trivial_from is not None:
+    trivial_truth = {s["id"]: truth_of[s["id"]][0] for s in train}
+    if args.trivial_from is not None:  # its sample ids may be DATA's too (another seed)
         train = [s for s in read_manifest(source)["samples"] if s["split"] == "train"]
+        trivial_truth = {}
         for s in train:
             meta = json.loads((source / s["dir"] / "sample.json").read_text())
-            truth_of[s["id"]] = (observables_of(meta["attributes"]), None)
-    median = torch.stack([truth_of[s["id"]][0] for s in train]).median(0).values
+            trivial_truth[s["id"]] = observables_of(meta["attributes"])
+    median = torch.stack([trivial_truth[s["id"]] for s in train]).median(0).values
     print(f"{args.data}: trivial = median of {len(train)} training samples of {source}")
     realistic = manifest["parsed_settings"].scene != "plain"
     if realistic:
@@ -95,10 +106,13 @@ def main() -> None:
         predictor = load_predictor(model)
         dataset = DropDataset(args.data, args.split, views=[predictor.view])
         if args.after_objects:
-            first = set(
-                list(dict.fromkeys(s["object_dir"] for s in dataset.samples))[: args.after_objects]
-            )
-            dataset.samples = [s for s in dataset.samples if s["object_dir"] not in first]
+            order = dataset.samples
+            if args.objects_of is not None:
+                order = [
+                    s for s in read_manifest(args.objects_of)["samples"] if s["split"] == "train"
+                ]
+            first = set(list(dict.fromkeys(s["object"] for s in order))[: args.after_objects])
+            dataset.samples = [s for s in dataset.samples if s["object"] not in first]
         started = time.perf_counter()
         rows = []
         for index in range(len(dataset)):
@@ -108,7 +122,7 @@ def main() -> None:
                 if args.masks == "true":
                     masks = dataset.masks(index)[0].float()
                 else:
-                    masks = segment_frames(frames)
+                    masks = segment_clip(segmenter, frames)
                 frames = frames * masks[..., None]
             out = predictor.predict(frames[None])
             predicted = observables_of({k: out[k][0] for k in ATTRIBUTES})

@@ -11,7 +11,8 @@ taken as a user's recording (frames only):
   the ground as predict reads it (from the first touch, else where the object rests) and, for
   the record, from the rest alone:
   scale error = the object's metric size read from the video / the truth − 1 (from the distance
-  and the focal length: size = pixels · distance / f); ground error = the drop height read from
+  and the focal length: size = pixels · distance / f), and how often the size's 10–90 % interval
+  (prediction.json's size_factor_10_90) holds the truth; ground error = the drop height read from
   the video − the true one (the height above the estimated ground of the object's true lowest
   point in frame 0, at its pixel and the depth the estimate gives the object), metres: what
   decides when the simulated object lands.
@@ -68,6 +69,7 @@ def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True) ->
         "pitch_deg": estimate.pitch_deg,
         "fall_frames": estimate.fall_frames,
         "contact_s": estimate.contact_s,
+        "size_factor_10_90": list(estimate.size_factor_10_90),  # true size / read: 10–90 %
     }
 
 
@@ -154,11 +156,16 @@ def main() -> None:
             continue
         scale = np.abs([g["scale_error"] for g in good])
         ground = np.abs([g["ground_error_m"] for g in good])
+        held = [
+            lo <= 1 / (1 + g["scale_error"]) <= hi
+            for g in good
+            for lo, hi in [g["size_factor_10_90"]]
+        ]
         print(
             f"{name}: |scale error| mean {scale.mean():.3f} median {np.median(scale):.3f} "
             f"≤ 10 %: {(scale <= 0.1).mean():.0%}; |ground error| mean {100 * ground.mean():.1f} "
             f"cm median {100 * np.median(ground):.1f} cm ≤ 2 cm: {(ground <= 0.02).mean():.0%}; "
-            f"refused {refused}"
+            f"refused {refused}; the size's 10–90 % interval holds the truth on {np.mean(held):.0%}"
         )
     print(f"(default vertical field of view {DEFAULT_FOV_DEG}°)")
     if args.out:

@@ -217,3 +217,27 @@ def test_a_touch_must_brake_the_fall_by_at_least_g(braking_g, found):
         assert read == pytest.approx(touch, abs=0.001)
     else:
         assert read is None
+
+
+def test_the_size_interval_holds_the_truth_and_widens_with_a_shorter_fall():
+    """The object's size read from the fall comes with a 10–90 % interval (prediction.json's
+    size_factor_10_90): it holds the true size over the read one for cameras near the pitch
+    prior, a camera 10° off it (whose cost the fit cannot see: an interval misses one time in
+    five) is within twice it, and a shorter fall (fewer frames to read g from) reads it less
+    well."""
+    widths = {}
+    for pitch_deg, drop in ((8.0, 0.45), (15.0, 0.45), (15.0, 0.15), (25.0, 0.45)):
+        masks, w2c, centres = ball_masks(pitch_deg, 2.0, drop, 0.1)
+        estimate = estimate_camera(masks, 0.03, fov_deg=45.0)
+        true_distance = float(np.linalg.norm(w2c[:3, :3] @ centres[0] + w2c[:3, 3]))
+        low, high = estimate.size_factor_10_90
+        error = abs(math.log(true_distance / estimate.distance))
+        assert error < (2 if pitch_deg == 25.0 else 1) * math.log(high)
+        assert low == pytest.approx(1 / high) and high < 1.3
+        assert estimate.to_json()["size_factor_10_90"] == [round(low, 3), round(high, 3)]
+        widths[(pitch_deg, drop)] = (high, estimate.fall_frames)
+    (long_high, long_frames), (short_high, short_frames) = (
+        widths[(15.0, 0.45)],
+        widths[(15.0, 0.15)],
+    )
+    assert short_frames < long_frames and short_high > long_high

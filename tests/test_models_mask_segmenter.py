@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from reconphys.capture import load_observation
 from reconphys.capture.masks import border_is_uniform
 from reconphys.cli import app
-from reconphys.data import GeneratedDropDataset, make_dataset, make_settings
+from reconphys.data import DropDataset, GeneratedDropDataset, make_dataset, make_settings
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import (
     MaskSegmenter,
@@ -29,7 +29,13 @@ from reconphys.models.mask_segmenter import (
 )
 from reconphys.pipeline.samples import segment_frames
 from reconphys.render.video import write_mp4
-from reconphys.train.masks import MaskTrainSettings, _batch, _Clip
+from reconphys.train.masks import (
+    MaskTrainSettings,
+    _batch,
+    _Clip,
+    held_out_meshes,
+    load_clips,
+)
 
 runner = CliRunner()
 REALISTIC = make_settings(
@@ -175,6 +181,29 @@ def test_train_masks_writes_a_loadable_model_and_refuses_plain_data(tmp_path):
     assert result.exit_code != 0 and "stores no masks" in result.output
     result = runner.invoke(app, [*command, "--zoom", "1.5", "0.8"])
     assert result.exit_code != 0 and "--zoom" in result.output
+
+
+def test_load_clips_reads_some_views_and_leaves_held_out_meshes_out(tmp_path):
+    """--views-per-sample N: sample i gives views i … i + N − 1 (mod 4); --exclude FOLDER: no
+    clip of a mesh in FOLDER's test split (a validation or test set stays held out)."""
+    data = tmp_path / "data"
+    make_dataset(replace(REALISTIC, resolution=16), data, workers=1)
+    stored = DropDataset(data, split="test")
+    clips = load_clips((str(data),), "test", views_per_sample=2)
+    assert len(clips) == 2 * len(stored) == 4
+    for k, clip in enumerate(clips):
+        index, view = divmod(k, 2)
+        expected = stored[index]["frames"][(index + view) % 4]
+        assert torch.equal(clip.frames, (expected * 255).round().to(torch.uint8))
+        assert torch.equal(clip.masks, stored.masks(index)[(index + view) % 4])
+    assert len(load_clips((str(data),), "test")) == 8  # every view
+    with pytest.raises(InputError, match="no test samples"):
+        load_clips((str(data),), "test", exclude=(str(data),))
+    listed = tmp_path / "held_out.txt"
+    listed.write_text(f"# held out\n{stored.samples[1]['object']}  # the second mesh\n\n")
+    assert held_out_meshes(str(listed)) == {stored.samples[1]["object"]}
+    kept = load_clips((str(data),), "test", exclude=(str(listed),))
+    assert len(kept) == 4 and torch.equal(kept[0].masks, stored.masks(0)[0])
 
 
 def test_a_zoomed_batch_is_the_clip_resampled():

@@ -520,3 +520,16 @@ def test_more_sources_add_the_same_objects_drops_from_other_seeds(folder, tmp_pa
         TrainingSamples(
             tiny(tmp_path, f"data.source={folder}", f"data.more_sources=['{bigger}']").data
         )
+    # a model of object crops resamples every folder to its crop: another resolution is more data
+    crop = ("objective.kind=supervised", "model.inputs=track", "model.crop=true")
+    config = tiny(tmp_path, *crop, f"data.source={folder}", f"data.more_sources=['{bigger}']")
+    mixed = TrainingSamples(config.data, assets=False, crop=True)
+    alone = TrainingSamples(replace(config.data, more_sources=()), assets=False, crop=True)
+    assert len(mixed) == 2 * len(alone)  # the same objects and samples, at 20 px
+    view = mixed.views[0]
+    stored = DropDataset(bigger, "train", views=[view], frames=range(config.data.frames))
+    last = len(mixed) - len(mixed.views)  # the first view of the added folder's last sample
+    side = config.data.resolution
+    expected = object_crop(stored[len(stored) - 1]["frames"][0], side)  # plain look: on black
+    assert mixed[last]["frames"].shape[-3:-1] == (side, side)
+    assert torch.allclose(mixed[last]["frames"][0], expected, atol=1e-6)

@@ -11,7 +11,8 @@ user's ``--fov``), and an object that falls freely for a few frames before it la
    (``√(area_t / area_0) = z_0 / z_t``) adds the motion along the view; a prior on θ
    (:data:`PITCH_PRIOR_DEG` ± :data:`PITCH_PRIOR_SPREAD_DEG`) keeps what the fall does not show.
    A wrong focal length scales the distance, not the object: the size and the motion in metres
-   follow from gravity and the pixels alone.
+   follow from gravity and the pixels alone. The fit's standard error of the depth (widened,
+   :data:`SCALE_ERROR_FACTOR`, :data:`SCALE_ERROR_FLOOR`) gives the size's 10–90 % interval.
 2. **Ground from the first touch.** The centroid leaves the free fall's path when the object
    touches the ground, as ``−c·(t − t_c)²`` while the ground's push builds (:func:`contact_time`
    fits t_c between frames). The centre's position at t_c (the fall's fit, metres) plus the
@@ -60,6 +61,13 @@ SEGMENTER_FALL_FIT_PX = 1.0
 # it by at least CONTACT_MIN_G·g (the ground stops a fall; a fall cut short by mask errors
 # leaves a slow drift, not a touch: the ground is then read from the rest). All chosen on
 # validation drops (docs/usage.md#the-ground-from-the-first-touch-2026-11-26-third-session)
+# The object's size read from the fall, 10–90 %: the fit's own standard error of the depth
+# (relative) times SCALE_ERROR_FACTOR, beside SCALE_ERROR_FLOOR for what the fit does not see
+# (the field of view, the pitch, an object that turns), in log; calibrated to cover 80 % on
+# validation drops (docs/usage.md#camera-and-ground-from-the-video)
+SCALE_ERROR_FACTOR = 2.5
+SCALE_ERROR_FLOOR = 0.05
+Z_10_90 = 1.2816  # the standard normal's 90 % quantile
 CONTACT_FRAMES_AFTER = 2
 CONTACT_MIN_PX = 2.0
 CONTACT_MIN_G = 1.0
@@ -77,6 +85,13 @@ class CameraEstimate:
     fall_frames: int  # frames of free fall fitted
     residual_px: float  # RMS of the fall's centroid fit, pixels
     contact_s: float | None = None  # first touch of the ground (None: ground from the rest)
+    scale_spread: float = 0.0  # the size's (and distance's) error, log, one standard deviation
+
+    @property
+    def size_factor_10_90(self) -> tuple[float, float]:
+        """The true size (distance, speeds) over the one read: 10–90 % interval."""
+        half = Z_10_90 * self.scale_spread
+        return math.exp(-half), math.exp(half)
 
     def to_json(self) -> dict:
         return {
@@ -87,6 +102,7 @@ class CameraEstimate:
             "distance_m": round(self.distance, 4),
             "fall_frames": self.fall_frames,
             "fall_fit_rms_px": round(self.residual_px, 3),
+            "size_factor_10_90": [round(x, 3) for x in self.size_factor_10_90],
             "ground_from": "where the object rests"
             if self.contact_s is None
             else f"the first touch of the ground, {self.contact_s:.3f} s",
@@ -239,7 +255,12 @@ def _fit_fall(
     fit = least_squares(residual, start, bounds=(lower, upper), x_scale="jac")
     params = fit.x if free_pitch else np.append(fit.x, pitch0)
     rms = float(np.sqrt(np.mean(fit.fun[: 2 * count] ** 2)))
-    return params, positions, rms
+    # the depth's standard error relative to it (the fit's residuals as the noise, linearised):
+    # the object's size, distance and speeds read from the video scale with it
+    noise = float(fit.fun @ fit.fun) / max(len(fit.fun) - len(fit.x), 1)
+    covariance = noise * np.linalg.pinv(fit.jac.T @ fit.jac)
+    depth_error = math.sqrt(max(float(covariance[2, 2]), 0.0)) / float(params[2])
+    return params, positions, rms, depth_error
 
 
 def _free_fall_frames(track: _Track, frame_dt: float, fit_px: float) -> int:
@@ -266,7 +287,7 @@ def object_depth(
     count = _free_fall_frames(track, frame_dt, fit_px)
     rotation = camera.world_to_cam[:3, :3].double().numpy()
     gravity = rotation @ np.array([0.0, 0.0, -GRAVITY_MAGNITUDE])
-    params, _, _ = _fit_fall(track, count, frame_dt, camera.K.double().numpy(), gravity)
+    params, *_ = _fit_fall(track, count, frame_dt, camera.K.double().numpy(), gravity)
     return float(params[2])
 
 
@@ -284,7 +305,7 @@ def estimate_camera(
     f, cx, cy = float(K[0, 0]), float(K[0, 2]), float(K[1, 2])
     track = mask_track(masks)
     count = _free_fall_frames(track, frame_dt, fit_px)
-    params, positions, rms = _fit_fall(track, count, frame_dt, K.numpy())
+    params, positions, rms, depth_error = _fit_fall(track, count, frame_dt, K.numpy())
     pitch = float(params[6])
     down = np.array([0.0, math.cos(pitch), math.sin(pitch)])  # world down in the camera frame
     metres_per_px = float(params[2]) / f  # at the object's frame-0 depth
@@ -332,4 +353,5 @@ def estimate_camera(
         fall_frames=count,
         residual_px=rms,
         contact_s=contact,
+        scale_spread=math.hypot(SCALE_ERROR_FACTOR * depth_error, SCALE_ERROR_FLOOR),
     )

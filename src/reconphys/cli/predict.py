@@ -148,6 +148,14 @@ def predict_command(
         f"{attributes['friction']:.2f} ({summary['anchors']} anchors, {summary['gaussians']} "
         f"Gaussians; geometry: {summary['geometry']})"
     )
+    estimate = summary.get("input", {}).get("camera_estimate")
+    if estimate is not None:
+        low, high = estimate["size_factor_10_90"]
+        typer.echo(
+            f"camera read from the video (fov {estimate['fov_deg']:g}° assumed or given): the "
+            f"object's size and speeds are known to ×{low:.2f}–×{high:.2f} (10–90 %)"
+            + ("; give --camera FILE for more" if high > 1.25 else "")
+        )
     if "model_choice" in summary:
         typer.echo(f"physics network: {summary['model']} ({summary['model_choice']})")
     if "gs_model_choice" in summary:

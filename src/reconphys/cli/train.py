@@ -140,6 +140,13 @@ def train_masks(
     zoom: tuple[float, float] = typer.Option(
         (1.0, 1.0), help="Per step, frames resampled by a factor log-uniform in LO HI."
     ),
+    exclude: list[Path] = typer.Option(
+        [],
+        "--exclude",
+        help="Meshes left out: a dataset folder's test split's, or a file of meshes "
+        "(configs/masks_held_out.txt); repeat.",
+    ),
+    views_per_sample: int = typer.Option(4, help="Views of each sample read (1–4): less memory."),
     threads: int = typer.Option(2, help="CPU threads (torch)."),
     no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
 ):
@@ -148,7 +155,8 @@ def train_masks(
     from ..threads import set_cpu_threads
     from ..train.masks import MaskTrainSettings, train_mask_segmenter
 
-    for name, value in (("--steps", steps), ("--batch-size", batch_size), ("--crop", crop)):
+    named = (("--steps", steps), ("--batch-size", batch_size), ("--crop", crop))
+    for name, value in (*named, ("--views-per-sample", views_per_sample)):
         if value < 1:
             raise InputError(f"must be ≥ 1, got {value}", field=name)
     if not (math.isfinite(lr) and lr > 0):
@@ -158,6 +166,9 @@ def train_masks(
     for folder in data:
         if not folder.is_dir():
             raise InputError("dataset folder not found", source=str(folder))
+    for held_out in exclude:
+        if not held_out.exists():
+            raise InputError("dataset folder or mesh list not found", source=str(held_out))
     settings = MaskTrainSettings(
         data=tuple(str(d) for d in data),
         out=str(out),
@@ -167,6 +178,8 @@ def train_masks(
         lr=lr,
         seed=seed,
         zoom=zoom,
+        exclude=tuple(str(d) for d in exclude),
+        views_per_sample=views_per_sample,
     )
     set_cpu_threads(threads)
     path = train_mask_segmenter(settings, progress=not no_progress, log=typer.echo)

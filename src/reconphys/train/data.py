@@ -88,8 +88,10 @@ def generate_settings(config: DataConfig) -> DataSettings:
 
 
 # settings in which data.more_sources may differ from data.source (what else differs would change
-# what a video shows)
+# what a video shows); a model of object crops reads every folder resampled to its crop, so for it
+# the recordings' resolution is free too (several resolutions: the look of small and large objects)
 FREE_KEYS = ("seed", "objects", "test_objects", "samples_per_object", "test_samples_per_object")
+CROP_FREE_KEYS = (*FREE_KEYS, "resolution")
 
 
 class Folders(Dataset):
@@ -235,17 +237,19 @@ class TrainingSamples(Dataset):
     def _more(self, config: DataConfig, first: DropDataset, view: int, resolution):
         """data.more_sources' samples of ``first``'s objects (view ``view``)."""
         objects = {s["object"] for s in first.samples}
-        same = {k: v for k, v in self.settings.to_dict().items() if k not in FREE_KEYS}
+        free = CROP_FREE_KEYS if self.crop else FREE_KEYS
+        same = {k: v for k, v in self.settings.to_dict().items() if k not in free}
         for folder in config.more_sources:
             dataset = DropDataset(
                 folder, first.split, views=[view], frames=first.frame_index, resolution=resolution
             )
-            theirs = {k: v for k, v in dataset.settings.to_dict().items() if k not in FREE_KEYS}
+            theirs = {k: v for k, v in dataset.settings.to_dict().items() if k not in free}
             if theirs != same:
                 differ = sorted(k for k in same if theirs.get(k) != same[k])
                 raise InputError(
                     f"made with other settings than data.source ({', '.join(differ)}): only "
-                    "the seed and the counts of objects and samples may differ",
+                    "the seed and the counts of objects and samples may differ"
+                    + ("" if self.crop else " (and the resolution, for a model of object crops)"),
                     source=folder,
                     field="data.more_sources",
                 )

@@ -54,6 +54,8 @@ class MaskTrainSettings:
     seed: int = 0
     checkpoint_every: int = 500
     zoom: tuple[float, float] = (1.0, 1.0)  # per step, log-uniform: frames resampled by it
+    exclude: tuple[str, ...] = ()  # meshes left out: a folder's test split's, or a list file
+    views_per_sample: int = 4  # sample i gives views i, i + 1, … (mod 4): more meshes per GB
 
 
 @dataclass
@@ -63,25 +65,50 @@ class _Clip:
     masks: torch.Tensor  # [T, H, W] bool
 
 
-def load_clips(folders: tuple[str, ...], split: str = "train", progress: bool = False) -> list:
-    """Every view of every ``split`` sample of ``folders`` as a clip (refuses plain datasets)."""
+def held_out_meshes(source: str) -> set[str]:
+    """The meshes (a sample's ``object``) that ``source`` names: a dataset folder's test split's,
+    or a text file's lines (a mesh per line, ``#`` starts a comment: configs/masks_held_out.txt)."""
+    path = Path(source)
+    if path.is_file():
+        lines = (line.split("#", 1)[0].strip() for line in path.read_text().splitlines())
+        return {line for line in lines if line}
+    return {s["object"] for s in DropDataset(path, split="test").samples}
+
+
+def load_clips(
+    folders: tuple[str, ...],
+    split: str = "train",
+    progress: bool = False,
+    exclude: tuple[str, ...] = (),
+    views_per_sample: int = 4,
+) -> list:
+    """The views of every ``split`` sample of ``folders`` as clips (refuses plain datasets):
+    ``views_per_sample`` of them (sample i's views i, i + 1, … mod the view count), and none of
+    a mesh that an ``exclude`` entry names (a held-out set stays held out): a dataset folder's
+    test split's meshes, or a text file of meshes (:func:`held_out_meshes`)."""
+    held_out = set().union(*map(held_out_meshes, exclude))
     clips = []
     for folder in folders:
         dataset = DropDataset(folder, split=split)
-        indices = range(len(dataset))
+        samples = [s for s in dataset.samples if s["object"] not in held_out]
+        per_view = []  # one dataset a view: a sample's other views are not decoded
+        for view in dataset.views:
+            per_view.append(DropDataset(folder, split=split, views=[view]))
+            per_view[-1].samples = samples
+        indices = range(len(samples))
         if progress:
             from tqdm.auto import tqdm
 
             indices = tqdm(indices, desc=f"reading {folder}", unit="sample")
         for index in indices:
-            item, masks = dataset[index], dataset.masks(index)
-            for view in range(item["frames"].shape[0]):
-                frames = item["frames"][view]
+            count = len(per_view)
+            for view in sorted({(index + k) % count for k in range(views_per_sample)}):
+                frames = per_view[view][index]["frames"][0]  # [T, H, W, 3] in [0, 1]
                 clips.append(
                     _Clip(
                         frames=(frames * 255).round().to(torch.uint8),
                         references=clip_references(frames),
-                        masks=masks[view],
+                        masks=per_view[view].masks(index)[0],
                     )
                 )
     if not clips:
@@ -129,7 +156,9 @@ def mask_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 def train_mask_segmenter(settings: MaskTrainSettings, progress: bool = True, log=print) -> Path:
     out = Path(settings.out)
-    clips = load_clips(settings.data, progress=progress)
+    clips = load_clips(
+        settings.data, "train", progress, settings.exclude, settings.views_per_sample
+    )
     torch.manual_seed(settings.seed)
     model = MaskSegmenter()
     optimizer = torch.optim.AdamW(model.parameters(), lr=settings.lr, weight_decay=1e-4)
