@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 import torch
@@ -61,16 +62,16 @@ SEGMENTER_FALL_FIT_PX = 1.0
 # it by at least CONTACT_MIN_G·g (the ground stops a fall; a fall cut short by mask errors
 # leaves a slow drift, not a touch: the ground is then read from the rest). All chosen on
 # validation drops (docs/usage.md#the-ground-from-the-first-touch-2026-11-26-third-session)
+CONTACT_FRAMES_AFTER = 2
+CONTACT_MIN_PX = 2.0
+CONTACT_MIN_G = 1.0
 # The object's size read from the fall, 10–90 %: the fit's own standard error of the depth
 # (relative) times SCALE_ERROR_FACTOR, beside SCALE_ERROR_FLOOR for what the fit does not see
 # (the field of view, the pitch, an object that turns), in log; calibrated to cover 80 % on
 # validation drops (docs/usage.md#camera-and-ground-from-the-video)
 SCALE_ERROR_FACTOR = 2.5
 SCALE_ERROR_FLOOR = 0.05
-Z_10_90 = 1.2816  # the standard normal's 90 % quantile
-CONTACT_FRAMES_AFTER = 2
-CONTACT_MIN_PX = 2.0
-CONTACT_MIN_G = 1.0
+Z_10_90 = NormalDist().inv_cdf(0.9)  # 1.2816
 
 
 @dataclass
@@ -201,9 +202,9 @@ def _fit_fall(
     gravity: np.ndarray | None = None,  # [3] m/s² in the camera frame; None: pitch fitted
 ):
     """Least-squares fit of the free fall to the masks' centroid and growth (module doc, 1).
-    Returns ``(params, positions, rms_px)``: params = P0 [3], V0 [3] (camera frame, metres,
-    m/s) and the pitch (radians; the prior's where ``gravity`` is given), positions(params, t)
-    → [F, 3]."""
+    Returns ``(params, positions, rms_px, depth_error)``: params = P0 [3], V0 [3] (camera frame,
+    metres, m/s) and the pitch (radians; the prior's where ``gravity`` is given), positions(params,
+    t) → [F, 3], and the depth's standard error relative to it (the residuals as the noise)."""
     from scipy.optimize import least_squares
 
     fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])

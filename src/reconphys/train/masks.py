@@ -100,8 +100,8 @@ def load_clips(
             from tqdm.auto import tqdm
 
             indices = tqdm(indices, desc=f"reading {folder}", unit="sample")
+        count = len(per_view)
         for index in indices:
-            count = len(per_view)
             for view in sorted({(index + k) % count for k in range(views_per_sample)}):
                 frames = per_view[view][index]["frames"][0]  # [T, H, W, 3] in [0, 1]
                 clips.append(
