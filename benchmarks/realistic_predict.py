@@ -69,11 +69,21 @@ def main() -> None:
     parser.add_argument("--configs", default=",".join(CONFIGS))
     parser.add_argument("--out", default=None, help="JSON file of the per-sample rows")
     parser.add_argument("--split", default="test", help="test, or train to choose a setting")
+    parser.add_argument(
+        "--after-objects",
+        type=int,
+        default=0,
+        help="skip the split's first N objects (with --split train: the validation meshes a "
+        "model trained on the first N never saw)",
+    )
     args = parser.parse_args()
     configs = args.configs.split(",")
     torch.set_num_threads(2)
     root = Path(args.data)
     dataset = DropDataset(root, split=args.split, views=[0])
+    if args.after_objects:
+        first = set(list(dict.fromkeys(s["object"] for s in dataset.samples))[: args.after_objects])
+        dataset.samples = [s for s in dataset.samples if s["object"] not in first]
     midpoints = {k: 0.5 * (lo + hi) for k, (lo, hi) in ATTRIBUTE_RANGES.items()}
     trivial = observables(midpoints)
     rows = []
@@ -136,6 +146,8 @@ def main() -> None:
                         replace(result.asset, physics=replace(result.asset.physics, **midpoints)),
                         result.observation,
                     ),
+                    "search": result.details.get("search"),  # start, profiles, temperature
+                    "intervals": intervals,
                     "covered": None
                     if intervals is None
                     else [
@@ -173,6 +185,10 @@ def main() -> None:
         coverage = (
             " / ".join(f"{100 * c:.0f} %" for c in np.mean(covered, axis=0)) if covered else "–"
         )
+        widths = [[hi - lo for lo, hi in r[config]["intervals"].values()] for r in done
+                  if r[config]["intervals"] is not None]  # fmt: skip
+        if widths:
+            coverage += " (mean widths " + " / ".join(f"{w:.2f}" for w in np.mean(widths, 0)) + ")"
         print(
             f"{config}: {len(done)} answered, {len(rows) - len(done)} refused; MAE log k/m "
             f"{mae[0]:.3f} log d/m {mae[1]:.3f} f {mae[2]:.3f} (trivial {base[0]:.3f} / "

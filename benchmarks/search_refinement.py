@@ -28,6 +28,7 @@ import torch
 
 from reconphys.data.storage import read_manifest
 from reconphys.models.shipped import load_predictor
+from reconphys.physics import ATTRIBUTE_RANGES
 from reconphys.pipeline.predict import predict_observation
 from reconphys.pipeline.samples import load_sample
 from reconphys.pipeline.search import (
@@ -89,7 +90,11 @@ def main() -> None:
         ).tolist()
         for s in train
     ]
-    median = [sorted(v[i] for v in values)[len(values) // 2] for i in range(3)]
+    if values:
+        median = [sorted(v[i] for v in values)[len(values) // 2] for i in range(3)]
+    else:  # a test-only folder: the attribute ranges' midpoints (a uniform prior's medians)
+        midpoints = {k: 0.5 * (lo + hi) for k, (lo, hi) in ATTRIBUTE_RANGES.items()}
+        median = observables(SimpleNamespace(**midpoints)).tolist()
     tests = [s for s in manifest["samples"] if s["split"] == args.split]
     skipped = set(list(dict.fromkeys(s["object_dir"] for s in tests))[: args.skip_objects])
     tests = [s for s in tests if s["object_dir"] not in skipped][: args.limit]

@@ -234,7 +234,15 @@ def test_the_size_interval_holds_the_truth_and_widens_with_a_shorter_fall():
         error = abs(math.log(true_distance / estimate.distance))
         assert error < (2 if pitch_deg == 25.0 else 1) * math.log(high)
         assert low == pytest.approx(1 / high) and high < 1.3
-        assert estimate.to_json()["size_factor_10_90"] == [round(low, 3), round(high, 3)]
+        written = estimate.to_json()
+        assert written["size_factor_10_90"] == [round(low, 3), round(high, 3)]
+        lo_m, hi_m = written["distance_m_10_90"]  # the same interval in metres: holds the truth
+        assert lo_m < estimate.distance < hi_m and lo_m == pytest.approx(
+            estimate.distance * low, abs=1e-4
+        )
+        if pitch_deg != 25.0:
+            assert lo_m <= true_distance <= hi_m
+        assert written["camera_height_m_10_90"][1] == pytest.approx(estimate.height * high, 1e-3)
         widths[(pitch_deg, drop)] = (high, estimate.fall_frames)
     (long_high, long_frames), (short_high, short_frames) = (
         widths[(15.0, 0.45)],

@@ -101,7 +101,7 @@ def test_feed_forward_method_uses_no_ground_truth(dataset, model_path, tmp_path,
     assert asset.gaussians.num_gaussians <= 16 * 16  # one per object pixel of the 16-px view
     assert asset.gaussians.num_gaussians != truth.gaussians.num_gaussians
     assert not torch.equal(asset.v0, truth.v0)  # estimated, not the truth
-    assert prediction.intervals is None  # the network alone gives none
+    assert prediction.intervals is None  # one network alone gives none (an ensemble would)
 
     video = METHODS["reconphys_video"](options)  # predict's default: then the search
     assert not video.uses_ground_truth

@@ -242,7 +242,7 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
     write_mp4(video, (frames.numpy() * 255).round().astype(np.uint8), fps=1 / 0.03)
     out = tmp_path / "asset"
     flags = ["--no-refine", "--preview-frames", "0"]
-    result = runner.invoke(app, ["predict", str(video), "--out", str(out), *flags])
+    result = runner.invoke(app, ["predict", str(video), "--out", str(out), "--preview-frames", "0"])
     assert result.exit_code == 0, result.output
     summary = json.loads((out / "prediction.json").read_text())
     read = summary["input"]
@@ -259,6 +259,12 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
     assert "object-centric" in summary["gs_model_choice"] and summary["gaussians"] >= 100
     assert summary["object_distance"]["how"] == "fall" and summary["object_distance"]["m"] > 0.3
     assert 0.3 < estimate["distance_m"] < 20 and estimate["camera_height_m"] > 0
+    # on that predicted geometry the search's fit is multiplied by the network's belief
+    assert summary["search"]["network_sigma"] == pytest.approx(
+        list(summary["network_sigma"].values()), abs=1e-3
+    )
+    assert "times the network's belief" in summary["intervals_how"]
+    assert "the recording's fit × the network's belief" in result.output
     out2 = tmp_path / "asset2"
     command = ["predict", str(video), "--out", str(out2), "--camera", "dataset", *flags]
     result = runner.invoke(app, command)

@@ -26,6 +26,7 @@ from reconphys.models.physics_predictor import (
     PredictorConfig,
     PredictorEnsemble,
     attributes_from_unit,
+    observable_spread,
 )
 from reconphys.models.shipped import (
     ENV_VAR,
@@ -122,6 +123,25 @@ def test_an_ensemble_answers_the_mean_of_its_members_and_round_trips(tmp_path):
             load_predictor(path)
     with pytest.raises(ValueError, match="at least 2"):
         PredictorEnsemble(TINY, 1)
+
+
+def test_the_members_spread_is_their_standard_deviation_of_each_observable():
+    """observable_spread against numpy's std (ddof 1) of log k/m, log d/m and f computed from
+    each member's attributes; identical members spread 0; one member is an error."""
+    import numpy as np
+
+    torch.manual_seed(1)
+    units = torch.rand(4, 3, 4, dtype=torch.float64)
+    spread = observable_spread(units)
+    assert spread.shape == (3, 3)
+    a = {k: v.numpy() for k, v in attributes_from_unit(units).items()}
+    values = np.stack(
+        [np.log(a["stiffness"] / a["mass"]), np.log(a["damping"] / a["mass"]), a["friction"]], -1
+    )
+    assert spread.numpy() == pytest.approx(values.std(0, ddof=1), rel=1e-9)
+    assert observable_spread(units[:1].repeat(3, 1, 1)).abs().max() < 1e-12
+    with pytest.raises(ValueError, match="M ≥ 2"):
+        observable_spread(units[:1])
 
 
 def test_bad_files_are_one_line_errors(saved):

@@ -89,6 +89,8 @@ def test_summary_numbers_are_what_predict_computed(demo_out):
         cells = [c.strip() for c in row.split("|")[1:-1]]
         assert cells[1] == f"{truth[name]:.2f}"  # true
         assert cells[2] == f"**{value:.2f}**"  # predicted: what the asset holds
+        low, high = prediction["intervals"][name]  # --no-refine: the network's own belief
+        assert cells[4].startswith(f"[{low:.2f}, {high:.2f}]") and "belief" in cells[5]
     timings = prediction["timings_s"]
     assert f"decode {timings['decode']:.2f}" in summary
 

@@ -24,6 +24,7 @@ from reconphys.cli import app
 from reconphys.errors import InputError
 from reconphys.models.model_input import predictor_frames
 from reconphys.models.physics_predictor import resize_frames
+from reconphys.pipeline.search import network_intervals
 from reconphys.render import Cameras, render
 from reconphys.render.cameras import dataset_views, intrinsics_from_fov
 
@@ -104,10 +105,23 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
         [dataset, "--sample", sample_id, "--preview-frames", "0", "--no-refine"], tmp_path, "ff"
     )
     assert stored.exit_code == 0, stored.output
-    assert "no intervals" in stored.output
+    assert "network's belief" in stored.output
     reference = json.loads((stored_out / "prediction.json").read_text())
     assert reference["geometry"].startswith("ground truth")
-    assert reference["intervals"] is None and "search" not in reference["timings_s"]
+    assert "search" not in reference["timings_s"]
+    # --no-refine: the shipped ensemble's own interval, ±1.2816 σ around its answer (cut)
+    assert "network's belief alone" in reference["intervals_how"]
+    sigma = torch.tensor(list(reference["network_sigma"].values()), dtype=torch.float64)
+    answer = torch.tensor(list(reference["observables"].values()), dtype=torch.float64)
+    assert (sigma > 0).all()
+    expected = network_intervals(answer, sigma)
+    for name, (low, high) in reference["intervals"].items():
+        assert [low, high] == pytest.approx(expected[name], abs=1e-3)
+        assert low <= reference["observables"][name] <= high
+    # the plain look with a given PLY: the search's profiles alone (the network's belief is
+    # multiplied in on the object-centric predictor's geometry only)
+    assert summary["search"]["network_sigma"] is None
+    assert "times the network's belief" not in summary["intervals_how"]
     assert reference["attributes"] == reference["feed_forward"]
     a, b = summary["feed_forward"], reference["attributes"]
     # H.264 at 32 px changes the input a little: the prediction may move, not jump

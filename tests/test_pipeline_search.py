@@ -23,9 +23,11 @@ from reconphys.pipeline.search import (
     PREDICTED_GEOMETRY_TEMPERATURE,
     attributes_of,
     lighting_gain,
+    network_intervals,
     observable_bounds,
     observables,
     profile_interval,
+    profile_quantiles,
     scaled_colours,
     search,
     substep_groups,
@@ -124,6 +126,17 @@ def test_search_keeps_what_the_video_does_not_show(sample, monkeypatch):
         width = float(bounds[i, 1] - bounds[i, 0])
         assert low == pytest.approx(float(bounds[i, 0]) + 0.1 * width, abs=0.01 * width)
         assert high == pytest.approx(float(bounds[i, 0]) + 0.9 * width, abs=0.01 * width)
+    # with the network's belief: its normal around the start comes back, the start as its median
+    sigma = torch.tensor([0.4, 0.5, 0.05], dtype=torch.float64)
+    start = observables(truth.asset.physics)
+    found, history = search(truth.asset, observation.frames[:20], observation.camera,
+                            prior_sigma=sigma)  # fmt: skip
+    assert history["undetermined"] == ["log_k_over_m", "log_d_over_m", "friction"]
+    assert history["network_sigma"] == pytest.approx(sigma.tolist())
+    assert observables(found.physics) == pytest.approx(start, abs=0.01 * float(sigma.min()) + 2e-2)
+    expected = network_intervals(start, sigma)
+    for name, (low, high) in history["intervals"].items():
+        assert [low, high] == pytest.approx(expected[name], abs=0.02)
 
 
 def test_profile_interval_of_a_sharp_minimum_is_narrow_and_holds_it():
@@ -137,6 +150,41 @@ def test_profile_interval_of_a_sharp_minimum_is_narrow_and_holds_it():
     assert sigma > 0.1  # well resolved by the grid (0.025) and the quantile line (0.0025)
     assert low == pytest.approx(best - 1.2816 * sigma, abs=0.01)
     assert high == pytest.approx(best + 1.2816 * sigma, abs=0.01)
+
+
+def test_a_normal_prior_times_a_profile_is_their_analytic_product():
+    """A flat profile leaves the network's normal belief: median μ, 10–90 % μ ± 1.2816 σ. A
+    quadratic profile (a normal likelihood, σ_L² = τ·E_min / (2a)) times the normal prior is the
+    normal with precision 1/σ_L² + 1/σ² and the precision-weighted mean."""
+    values = torch.linspace(0.0, 10.0, 401, dtype=torch.float64)
+    mu, sigma = 4.0, 0.6
+    flat = profile_quantiles(values, torch.full_like(values, 0.3), (0.0, 10.0), 0.05,
+                             (0.1, 0.5, 0.9), prior=(mu, sigma), points=4001)  # fmt: skip
+    assert flat == pytest.approx([mu - 1.2816 * sigma, mu, mu + 1.2816 * sigma], abs=0.01)
+    best, curvature, floor, temperature = 6.3, 0.01, 1e-2, 0.05
+    errors = floor + curvature * (values - best) ** 2
+    sigma_l2 = temperature * floor / (2 * curvature)
+    precision = 1 / sigma_l2 + 1 / sigma**2
+    mean, spread = (best / sigma_l2 + mu / sigma**2) / precision, precision**-0.5
+    both = profile_quantiles(values, errors, (0.0, 10.0), temperature, (0.1, 0.5, 0.9),
+                             prior=(mu, sigma), points=4001)  # fmt: skip
+    assert both == pytest.approx([mean - 1.2816 * spread, mean, mean + 1.2816 * spread], abs=0.01)
+    assert mu < both[1] < best  # between the two, nearer the sharper (the profile)
+    # without a prior: the flat-prior interval of profile_interval
+    assert profile_quantiles(values, errors, (0.0, 10.0), temperature, points=4001) == list(
+        profile_interval(values, errors, (0.0, 10.0), temperature, points=4001)
+    )
+
+
+def test_the_networks_own_intervals_are_its_normal_belief_cut_to_the_reachable_range():
+    bounds = observable_bounds()
+    centre = torch.tensor([4.0, float(bounds[1, 1]) - 0.1, 0.5], dtype=torch.float64)
+    sigma = torch.tensor([0.5, 1.0, 0.1], dtype=torch.float64)
+    out = network_intervals(centre, sigma)
+    assert list(out) == ["log_k_over_m", "log_d_over_m", "friction"]
+    assert out["log_k_over_m"] == pytest.approx([4.0 - 0.6408, 4.0 + 0.6408], abs=1e-4)
+    assert out["log_d_over_m"][1] == pytest.approx(float(bounds[1, 1]))  # cut at the bound
+    assert out["friction"] == pytest.approx([0.5 - 0.12816, 0.5 + 0.12816], abs=1e-4)
 
 
 def test_the_temperature_falls_as_the_compared_pixels_grow():

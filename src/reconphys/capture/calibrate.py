@@ -101,6 +101,9 @@ class CameraEstimate:
             "pitch_deg": round(self.pitch_deg, 3),
             "camera_height_m": round(self.height, 4),
             "distance_m": round(self.distance, 4),
+            # every length read from the fall scales with the one depth: the size's interval
+            "camera_height_m_10_90": [round(self.height * f, 4) for f in self.size_factor_10_90],
+            "distance_m_10_90": [round(self.distance * f, 4) for f in self.size_factor_10_90],
             "fall_frames": self.fall_frames,
             "fall_fit_rms_px": round(self.residual_px, 3),
             "size_factor_10_90": [round(x, 3) for x in self.size_factor_10_90],

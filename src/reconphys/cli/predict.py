@@ -161,21 +161,32 @@ def predict_command(
     if "gs_model_choice" in summary:
         typer.echo(f"3DGS predictor: {summary['gs_model_choice']}")
     intervals = summary["intervals"]
+    s = summary.get("search")
     if intervals:
-        s = summary["search"]
-        kept = "  not shown by the recording: the network's value kept"
+        with_network = s is None or s.get("network_sigma") is not None
+        kept = (
+            "  not shown by the recording: the network's belief"
+            if with_network
+            else "  not shown by the recording: the network's value kept"
+        )
         lines = [
             f"  {name:<13} {summary['observables'][name]:7.3f}   [{lo:7.3f}, {hi:7.3f}]"
-            + (kept if name in s["undetermined"] else "")
+            + (kept if s is not None and name in s["undetermined"] else "")
             for name, (lo, hi) in intervals.items()
         ]
-        typer.echo(
-            f"search: {s['rollouts']} batched rollouts in {s['seconds']} s; observable, best, "
-            "10–90 % interval (natural logs of the SI ratios; a wide one: the video does not "
-            "show it):\n" + "\n".join(lines)
-        )
+        if s is None:
+            head = "feed-forward (--no-refine): observable, answer, 10–90 % of the network's belief"
+        else:
+            head = f"search: {s['rollouts']} batched rollouts in {s['seconds']} s: observable, "
+            head += (
+                "answer, 10–90 % of the recording's fit × the network's belief"
+                if with_network
+                else "best, 10–90 % interval (a wide one: the video does not show it)"
+            )
+        head += " (natural logs of the SI ratios)"
+        typer.echo(head + ":\n" + "\n".join(lines))
     else:
-        typer.echo("no intervals: the feed-forward answer alone (--no-refine)")
+        typer.echo("no intervals: the feed-forward answer alone (--no-refine), not an ensemble")
     if "refine" in summary:
         r = summary["refine"]
         typer.echo(

@@ -280,6 +280,20 @@ def attributes_from_unit(unit: Tensor) -> dict[str, Tensor]:
     return out
 
 
+def observable_spread(member_unit: Tensor) -> Tensor:
+    """An ensemble's members' unit outputs [M, B, 4] (M ≥ 2) → [B, 3] their standard deviation
+    (unbiased) of log k/m, log d/m (natural logs of the SI ratios) and friction: how much the
+    seeds disagree, the raw material of the network's own interval (pipeline/search.py
+    ``NETWORK_SPREAD_FACTOR``)."""
+    if member_unit.dim() != 3 or member_unit.shape[0] < 2 or member_unit.shape[-1] != 4:
+        raise ValueError(f"member_unit: expected [M ≥ 2, B, 4], got {list(member_unit.shape)}")
+    a = attributes_from_unit(member_unit.double())
+    values = torch.stack(
+        [(a["stiffness"] / a["mass"]).log(), (a["damping"] / a["mass"]).log(), a["friction"]], -1
+    )
+    return values.std(0)
+
+
 def normalize_attributes(attributes: dict[str, Tensor] | Tensor) -> Tensor:
     """Inverse of :func:`attributes_from_unit`: attributes (dict, or [..., 4] in
     ATTRIBUTES) → [..., 4] in [0, 1] (clamped)."""

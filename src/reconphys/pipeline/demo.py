@@ -104,7 +104,14 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
     found = prediction["observables"]
     network = true_observables(prediction["feed_forward"])
     intervals = prediction.get("intervals") or {}
-    undetermined = set((prediction.get("search") or {}).get("undetermined", []))
+    search = prediction.get("search")
+    undetermined = set((search or {}).get("undetermined", []))
+    with_belief = search is not None and search.get("network_sigma") is not None
+    not_shown = (
+        "no: the network's belief decides"
+        if with_belief
+        else ("no: too wide, the network's value kept")
+    )
     guess = prior_centre()
     rows = []
     for name, label in OBSERVABLE_LABELS.items():
@@ -112,7 +119,8 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
             lo, hi = intervals[name]
             inside = "yes" if lo <= truth[name] <= hi else "no"
             interval = f"[{lo:.2f}, {hi:.2f}] (truth inside: {inside})"
-            shown = "no: too wide, the network's value kept" if name in undetermined else "yes"
+            shown = not_shown if name in undetermined else "yes"
+            shown = "– (--no-refine: the network's belief)" if search is None else shown
         else:
             interval, shown = "– (--no-refine)", "–"
         rows.append(
@@ -145,10 +153,17 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
         "|---|---|---|---|---|---|---|",
         *rows,
         "",
-        "*predicted*: what the asset holds (the search's best fit where the video shows the "
-        "observable; where its interval is too wide, the network's value). *guess without the "
-        "video*: the middle of the training prior. True values: `truth.json` (the simulation "
-        "that made the clip); predict never read them.",
+        "*predicted*: what the asset holds — "
+        + (
+            "the median of the search's fit to the video times the network's own belief (a "
+            "normal at its answer, σ from its members' spread), so the network's answer where "
+            "the video shows little and the fit's where it shows much"
+            if with_belief
+            else "the search's best fit where the video shows the observable; where its interval "
+            "is too wide, the network's value"
+        )
+        + ". *guess without the video*: the middle of the training prior. True values: "
+        "`truth.json` (the simulation that made the clip); predict never read them.",
     ]
     if velocity is not None and true_velocity is not None:
         lines += [

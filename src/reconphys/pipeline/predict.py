@@ -38,6 +38,7 @@ from ..models.gaussian_shipped import (
     load_gaussian_predictor,
 )
 from ..models.model_input import network_input
+from ..models.physics_predictor import observable_spread
 from ..models.reconstruct import (
     initial_velocity,
     object_distance,
@@ -46,7 +47,7 @@ from ..models.reconstruct import (
 )
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
-from .search import OBSERVABLES, observables
+from .search import NETWORK_SPREAD_FACTOR, OBSERVABLES, network_intervals, observables
 
 PLACEMENTS = ("auto", "as-is", "fit")
 GROUNDS = ("camera", "landed")
@@ -56,7 +57,17 @@ INTERVALS_HOW = (
     "10–90 % of the posterior along each observable's profile (the others at their best): "
     "pipeline/search.py; a wide interval means the recording does not show that observable"
 )
-NO_INTERVALS = "none: the feed-forward network alone gives no interval (run without --no-refine)"
+WITH_NETWORK_HOW = (
+    "10–90 % of the posterior along each observable's profile (the others at their best) times "
+    "the network's belief (normal, σ = 3–4 × its members' spread): pipeline/search.py; the "
+    "search's 'undetermined' lists what the recording alone does not show"
+)
+NETWORK_HOW = (
+    "10–90 % of the network's belief alone (normal at its answer, σ = 3–4 × its members' spread; "
+    "--no-refine): how far its answer is from the truth on objects it never saw, not what this "
+    "recording shows"
+)
+NO_INTERVALS = "none: this network is not an ensemble (run without --no-refine for intervals)"
 
 
 @dataclass
@@ -76,7 +87,12 @@ class PredictResult:
 
     @property
     def intervals_how(self) -> str:
-        return INTERVALS_HOW if self.intervals else NO_INTERVALS
+        if not self.intervals:
+            return NO_INTERVALS
+        search = self.details.get("search")
+        if search is None:
+            return NETWORK_HOW
+        return INTERVALS_HOW if search.get("network_sigma") is None else WITH_NETWORK_HOW
 
     def summary(self) -> dict:
         physics = self.asset.physics
@@ -359,6 +375,12 @@ def predict_observation(
         )
         out = predictor.model(frames.to(predictor.device))
     attributes = {name: float(out[name][0]) for name in ATTRIBUTES}
+    sigma = None  # [3] the network's belief: NETWORK_SPREAD_FACTOR × its members' spread
+    if "member_unit" in out:
+        spread = observable_spread(out["member_unit"].cpu())[0]
+        sigma = torch.tensor(NETWORK_SPREAD_FACTOR, dtype=spread.dtype) * spread
+        pairs = zip(OBSERVABLES, sigma.tolist(), strict=True)
+        details["network_sigma"] = {name: round(value, 4) for name, value in pairs}
     timings["physics_network"] = time.perf_counter() - started
 
     started = time.perf_counter()
@@ -395,11 +417,15 @@ def predict_observation(
             resolution=refine_resolution,
             masks=observation.masks[:count],
             temperature_scale=scale,
+            # on predicted geometry the fit alone is not to be trusted: times the network's belief
+            prior_sigma=sigma if object_centric else None,
         )
         timings["search"] = time.perf_counter() - started
         intervals = history["intervals"]
         details["search"] = {k: v for k, v in history.items() if k not in ("rounds", "intervals")}
         details["search"]["rollouts"] = len(history["rounds"])
+    elif sigma is not None:  # --no-refine: the network's own interval
+        intervals = network_intervals(observables(asset.physics), sigma)
     if refine_steps:
         from .refine import refine as gradient_refine
 

@@ -107,7 +107,7 @@ def with_caption(image: np.ndarray, lines: list[str]) -> np.ndarray:  # [H, W, 3
 def interval_lines(observables: dict[str, float], intervals: dict | None) -> list[str]:
     """The preview's caption: each observable with its 10–90 % interval (or why there is none)."""
     if not intervals:
-        return ["feed-forward only (--no-refine): no intervals"]
+        return ["feed-forward only (--no-refine), not an ensemble: no intervals"]
     names = {"log_k_over_m": "log k/m", "log_d_over_m": "log d/m", "friction": "friction"}
     return [
         f"{names[key]} {observables[key]:.2f}  [{low:.2f}, {high:.2f}] (10-90 %)"

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
+from statistics import NormalDist
 
 import torch
 from torch import Tensor
@@ -85,6 +86,18 @@ TEMPERATURE_PIXELS = (1000.0, 1500.0, 500.0)  # log k/m, log d/m, friction
 # first folder; docs/usage.md "Realistic recordings end to end".
 PREDICTED_GEOMETRY_TEMPERATURE = 4.0
 QUANTILES = (0.1, 0.9)
+Z_10_90 = NormalDist().inv_cdf(QUANTILES[1])  # 1.2816
+# The network's own belief about each observable: a normal distribution at the ensemble's mean
+# answer, σ = this × the members' standard deviation (models.physics_predictor.observable_spread),
+# per observable (log k/m, log d/m, f). The seeds' spread tracks the error only loosely (rank
+# correlation 0.1–0.3) and is too narrow by itself (its ±1.28 σ held the truth on 34–38 %).
+# Chosen on validation meshes only (never a test split) as the factors that keep every coverage
+# measured there inside 70–90 %: the network alone (benchmarks/network_intervals.py) × 3 / 3 / 4
+# held the truth on 80 / 73 / 86 % of 200 plain drops and tosses of the shipped ensemble's 100
+# validation meshes and 82 / 80 / 89 % of 200 realistic ones of the crop ensemble's (segmenter
+# masks); times the search's profiles on 56 realistic ones (predict's default path there) on
+# 80 / 79 / 75 % (friction × 3: 66 %). docs/usage.md "The network's belief and the recording's".
+NETWORK_SPREAD_FACTOR = (3.0, 3.0, 4.0)
 # An observable whose interval is at least this share of the prior's own 10–90 % width is not
 # shown by the recording: its best fit is noise (or a wrong geometry compensating), so the start
 # (the network's value) is kept for it and the history lists it under "undetermined".
@@ -254,18 +267,19 @@ def temperature_for(pixels: int) -> tuple[float, float, float]:
     return tuple(product / max(pixels, 1) for product in TEMPERATURE_PIXELS)
 
 
-def profile_interval(
+def profile_quantiles(
     values: Tensor,  # [P] grid along one observable (any order)
     errors: Tensor,  # [P] the photometric error at each
     bounds: tuple[float, float],  # the observable's reachable range
     temperature: float,
-    quantiles: tuple[float, float] = QUANTILES,
+    quantiles: tuple[float, ...] = QUANTILES,
+    prior: tuple[float, float] | None = None,  # (centre, σ) of a normal prior; None: flat
     points: int = 512,
-) -> tuple[float, float]:
-    """The (lo, hi) quantiles of the posterior ∝ exp(−(E − E_min) / (τ·E_min)) along a profile,
-    with E interpolated linearly between the grid values and held flat beyond them, and a flat
-    prior over ``bounds``. A flat profile gives the prior's quantiles; a sharp one, a narrow
-    interval around its minimum."""
+) -> list[float]:
+    """Quantiles of the posterior ∝ exp(−(E − E_min) / (τ·E_min)) · prior along a profile, with E
+    interpolated linearly between the grid values and held flat beyond them, over ``bounds``. A
+    flat profile gives the prior's quantiles (the flat prior's, or the normal's cut to the
+    bounds); a sharp one, a narrow interval around its minimum."""
     order = values.argsort()
     v, e = values[order].double(), errors[order].double()
     line = torch.linspace(bounds[0], bounds[1], points, dtype=torch.float64)
@@ -274,13 +288,37 @@ def profile_interval(
     share = ((line - left) / (right - left).clamp_min(1e-12)).clamp(0.0, 1.0)
     energy = e[index - 1] + share * (e[index] - e[index - 1])
     best = float(e.min())
-    scale = temperature * max(best, 1e-12)
-    weight = torch.exp(-(energy - energy.min()) / scale)
+    log_weight = -(energy - energy.min()) / (temperature * max(best, 1e-12))
+    if prior is not None:
+        centre, sigma = prior
+        log_weight = log_weight - 0.5 * ((line - centre) / max(sigma, 1e-9)) ** 2
+    weight = torch.exp(log_weight - log_weight.max())
     cdf = weight.cumsum(0) / weight.sum()
-    lo = float(line[int(torch.searchsorted(cdf, torch.tensor(quantiles[0], dtype=cdf.dtype)))])
-    hi_index = min(int(torch.searchsorted(cdf, torch.tensor(quantiles[1], dtype=cdf.dtype))),
-                   points - 1)  # fmt: skip
-    return lo, float(line[hi_index])
+    at = torch.searchsorted(cdf, torch.tensor(quantiles, dtype=cdf.dtype)).clamp_max(points - 1)
+    return line[at].tolist()
+
+
+def profile_interval(
+    values: Tensor,  # [P] grid along one observable (any order)
+    errors: Tensor,  # [P] the photometric error at each
+    bounds: tuple[float, float],  # the observable's reachable range
+    temperature: float,
+    quantiles: tuple[float, float] = QUANTILES,
+    points: int = 512,
+) -> tuple[float, float]:
+    """The (lo, hi) quantiles of the profile posterior with a flat prior over ``bounds``
+    (:func:`profile_quantiles`)."""
+    low, high = profile_quantiles(values, errors, bounds, temperature, quantiles, points=points)
+    return low, high
+
+
+def network_intervals(centre: Tensor, sigma: Tensor) -> dict[str, list[float]]:
+    """The network's own 10–90 % intervals: centre ± 1.2816 σ ([3] each: log k/m, log d/m, f),
+    cut to the reachable range (:func:`observable_bounds`)."""
+    bounds = observable_bounds()
+    low = torch.maximum(centre.double() - Z_10_90 * sigma.double(), bounds[:, 0])
+    high = torch.minimum(centre.double() + Z_10_90 * sigma.double(), bounds[:, 1])
+    return {n: [float(lo), float(hi)] for n, lo, hi in zip(OBSERVABLES, low, high, strict=True)}
 
 
 def search(
@@ -297,9 +335,16 @@ def search(
     temperature_scale: float = 1.0,  # × the default temperature (predicted geometry: wider)
     motion: Tensor | None = None,  # [6] initial (linear m/s, angular rad/s): searched with them
     silhouette_weight: float = 0.0,  # × the silhouettes' squared error, added (needs masks)
+    prior_sigma: Tensor | None = None,  # [3] σ of the network's belief, centred on the start
 ) -> tuple[Asset, dict]:
     """Coordinate search from the asset's attributes, then profiles → (asset with the best, history
-    dict with ``intervals`` {observable: [lo, hi]} when ``profiles``)."""
+    dict with ``intervals`` {observable: [lo, hi]} when ``profiles``).
+
+    Without ``prior_sigma`` each observable's interval is its profile posterior under a flat prior
+    and its value the best fit (the start where the profile is too flat to tell). With it, the
+    posterior is the profile's times the network's normal belief N(start, σ²): its median is the
+    value and its 10–90 % the interval — the network's answer where the recording shows little,
+    the fit's where it shows much. "undetermined" always says what the recording alone shows."""
     if frames.dim() != 4 or frames.shape[0] < 2 or frames.shape[-1] != 3:
         raise ValueError(f"frames: expected [T ≥ 2, H, W, 3], got {list(frames.shape)}")
     if candidates < 3 or candidates % 2 == 0:
@@ -398,6 +443,15 @@ def search(
             if high - low >= UNDETERMINED * float(prior_width[i]):
                 undetermined.append(OBSERVABLES[i])
                 current[i] = start[i]
+        if prior_sigma is not None:  # the network's belief × the profile: median and 10–90 %
+            for i, (name, (v, e)) in enumerate(zip(OBSERVABLES, found, strict=True)):
+                low, middle, high = profile_quantiles(
+                    v, e, tuple(bounds[i].tolist()), temperature[i],
+                    (QUANTILES[0], 0.5, QUANTILES[1]),
+                    prior=(float(start[i]), float(prior_sigma[i])),
+                )  # fmt: skip
+                intervals[name] = [low, high]
+                current[i] = middle
         profile = {
             name: {"values": v.tolist(), "errors": e.tolist()}
             for name, (v, e) in zip(OBSERVABLES, found, strict=True)
@@ -417,9 +471,10 @@ def search(
         "error": best_error,
         "lighting_gain": [round(float(g), 4) for g in gain],  # rendered colours × this
         "intervals": intervals,  # 10–90 % of the profile posterior (natural logs of SI ratios)
-        "undetermined": undetermined,  # observables the recording does not show: start kept
+        "undetermined": undetermined,  # what the recording alone does not show
         "profiles": profile,  # the last profile of each observable
         "temperature": list(temperature),  # τ of each observable's posterior
+        "network_sigma": None if prior_sigma is None else [float(x) for x in prior_sigma],
         "rounds": rounds,
         "render_size": size,
         "window": window,  # (left, top, width, height) of the recording compared; None: all

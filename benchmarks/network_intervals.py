@@ -1,0 +1,105 @@
+"""The network's own 10–90 % intervals: how wide its members' spread must be taken.
+
+For an ensemble physics model (members ≥ 2) on a dataset's videos (view 0, the model's frames;
+a realistic-look dataset cut out by its true masks or the shipped segmenter's, as
+``feed_forward.py``), the members' standard deviation of log k/m, log d/m and friction
+(``models.physics_predictor.observable_spread``) against the ensemble's error: its rank
+correlation with the error, and the share of videos whose interval answer ± 1.2816 · a · spread
+holds the truth, for several factors a. ``pipeline/search.py``'s ``NETWORK_SPREAD_FACTOR`` is the
+one that holds it about 80 % of the time on objects the model never trained on — run it on a
+validation split, never a test split:
+
+    python benchmarks/network_intervals.py data/real_pybullet --split train --after-objects 849 \\
+        --model src/reconphys/weights/physics_predictor_crop.safetensors --masks segmenter
+    python benchmarks/network_intervals.py VALIDATION_FOLDER          # the shipped plain ensemble
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from feed_forward import observables_of
+from scipy.stats import spearmanr
+
+from reconphys.data.dataset import DropDataset
+from reconphys.data.storage import read_manifest
+from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
+from reconphys.models.physics_predictor import observable_spread
+from reconphys.models.shipped import load_predictor
+from reconphys.physics import ATTRIBUTES
+from reconphys.pipeline.search import NETWORK_SPREAD_FACTOR, Z_10_90
+from reconphys.threads import set_cpu_threads
+
+NAMES = ("log k/m", "log d/m", "friction")
+FACTORS = (1.0, 2.0, 2.5, 3.0, 3.5, 4.0, 6.0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("data", type=Path, help="dataset folder written by make-data")
+    parser.add_argument("--model", default=None, help="an ensemble's weights (default: shipped)")
+    parser.add_argument("--split", default="test")
+    parser.add_argument(
+        "--after-objects", type=int, default=0, help="skip the split's first N objects"
+    )
+    parser.add_argument("--masks", choices=("true", "segmenter"), default="true")
+    parser.add_argument("--threads", type=int, default=2)
+    args = parser.parse_args()
+    set_cpu_threads(args.threads)
+    predictor = load_predictor(args.model)
+    dataset = DropDataset(args.data, args.split, views=[predictor.view])
+    if args.after_objects:
+        first = set(list(dict.fromkeys(s["object"] for s in dataset.samples))[: args.after_objects])
+        dataset.samples = [s for s in dataset.samples if s["object"] not in first]
+    realistic = read_manifest(args.data)["parsed_settings"].scene != "plain"
+    segmenter = load_mask_segmenter() if realistic and args.masks == "segmenter" else None
+    errors, spreads = [], []
+    started = time.perf_counter()
+    for index in range(len(dataset)):
+        item = dataset[index]
+        frames = item["frames"][0]
+        if realistic:
+            masks = dataset.masks(index)[0].float() if segmenter is None else None
+            masks = segment_clip(segmenter, frames) if masks is None else masks
+            frames = frames * masks[..., None]
+        with torch.no_grad():
+            out = predictor.predict(frames[None])
+        if "member_unit" not in out:
+            raise SystemExit(f"{predictor.path}: not an ensemble (members < 2): no spread")
+        answer = observables_of({k: out[k][0] for k in ATTRIBUTES})
+        errors.append((answer - observables_of(dataset.meta(index)["attributes"])).tolist())
+        spreads.append(observable_spread(out["member_unit"])[0].tolist())
+    error, spread = np.abs(np.array(errors)), np.array(spreads)
+    print(
+        f"{len(error)} videos of {args.data} ({args.split}, after {args.after_objects} objects, "
+        f"{args.masks if realistic else 'plain'} masks), model {predictor.path}; "
+        f"{platform.machine()}, torch {torch.__version__}, {time.perf_counter() - started:.0f} s"
+    )
+    for i, name in enumerate(NAMES):
+        rho = spearmanr(error[:, i], spread[:, i])[0]
+        cells = "  ".join(
+            f"a={a:g}: {np.mean(error[:, i] <= Z_10_90 * a * spread[:, i]):.0%}" for a in FACTORS
+        )
+        print(
+            f"{name:9} MAE {error[:, i].mean():.3f}, mean spread {spread[:, i].mean():.3f}, rank "
+            f"correlation with the error {rho:+.2f}; 10–90 % holds the truth: {cells}"
+        )
+    factor = np.array(NETWORK_SPREAD_FACTOR)
+    held = np.mean(error <= Z_10_90 * factor * spread, 0)
+    width = np.mean(2 * Z_10_90 * factor * spread, 0)
+    print(
+        f"shipped factors {' / '.join(f'{a:g}' for a in factor)}: holds "
+        + " / ".join(f"{h:.0%}" for h in held)
+        + ", mean width "
+        + " / ".join(f"{w:.2f}" for w in width)
+        + " (before cutting to the reachable range)"
+    )
+
+
+if __name__ == "__main__":
+    main()
