@@ -101,7 +101,10 @@ def main() -> None:
             write_camera(bundle / "camera.json", CameraSpec(K, w2c, width, height))
             write_ply(bundle / "gaussians.ply", dataset.asset(index).gaussians)
             truth = observables(meta["attributes"])
-            masks = dataset.masks(index)[0]  # [T, H, W] bool, view 0
+            if dataset.settings.scene == "plain":  # the object on black: its stored frames say
+                masks = item["frames"][0].amax(-1) > 0
+            else:
+                masks = dataset.masks(index)[0]  # [T, H, W] bool, view 0
             if "masks_dir" in configs:
                 (bundle / "masks").mkdir()
                 for t, mask in enumerate(masks.numpy()):
@@ -148,6 +151,7 @@ def main() -> None:
                     ),
                     "search": result.details.get("search"),  # start, profiles, temperature
                     "intervals": intervals,
+                    "network_sigma": result.details.get("network_sigma"),
                     "covered": None
                     if intervals is None
                     else [

@@ -119,7 +119,7 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
         assert [low, high] == pytest.approx(expected[name], abs=1e-3)
         assert low <= reference["observables"][name] <= high
     # the plain look with a given PLY: the search's profiles alone (the network's belief is
-    # multiplied in on the object-centric predictor's geometry only)
+    # multiplied in on a 3DGS predictor's geometry only)
     assert summary["search"]["network_sigma"] is None
     assert "times the network's belief" not in summary["intervals_how"]
     assert reference["attributes"] == reference["feed_forward"]
@@ -557,13 +557,17 @@ def test_predicted_geometry_from_the_first_frame(bundle, dataset, sample_id, tmp
             tmp_path / "gs",
             "--preview-frames",
             "0",
-            "--no-refine",  # geometry only (the default path's search: the mp4 test above)
         ],
         tmp_path,
     )
     assert result.exit_code == 0, result.output
     summary = json.loads((out / "prediction.json").read_text())
     assert summary["geometry"].startswith("predicted by the 3DGS predictor")
+    # on predicted geometry the search's fit is multiplied by the ensemble's own belief
+    assert summary["search"]["network_sigma"] == pytest.approx(
+        list(summary["network_sigma"].values()), abs=1e-3
+    )
+    assert "times the network's belief" in summary["intervals_how"]
     mask_pixels = int(
         (load_observation(bundle / "video.mp4", camera="dataset").masks[0] > 0.5).sum()
     )
