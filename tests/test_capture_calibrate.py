@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from reconphys.capture.calibrate import estimate_camera
+from reconphys.capture.masks import release_time
 from reconphys.errors import InputError
 from reconphys.render.cameras import intrinsics_from_fov, look_at
 
@@ -249,3 +250,26 @@ def test_the_size_interval_holds_the_truth_and_widens_with_a_shorter_fall():
         widths[(15.0, 0.15)],
     )
     assert short_frames < long_frames and short_high > long_high
+
+
+def _held_disc(release: float, held_row: float = 12.0, accel: float = 900.0, count: int = 30):
+    """[T, 64, 64] masks of a disc (radius 9 px) held at ``held_row`` until ``release`` seconds,
+    then falling from rest, ½ accel (t − release)² pixels (rows down), frames 0.03 s apart."""
+    rows, cols = torch.meshgrid(torch.arange(64.0) + 0.5, torch.arange(64.0) + 0.5, indexing="ij")
+    masks = []
+    for k in range(count):
+        fallen = 0.5 * accel * max(0.0, k * 0.03 - release) ** 2
+        centre = min(held_row + fallen, 50.0)
+        masks.append(((rows - centre) ** 2 + (cols - 32.0) ** 2 <= 81.0).float())
+    return torch.stack(masks)
+
+
+def test_the_release_of_a_held_object_is_read_from_its_fall():
+    """An object held still, then falling from rest: the release time comes back to a fraction of
+    a frame wherever it falls between frames; an object moving from frame 0, or never, gives
+    None."""
+    for release in (0.21, 0.2475, 0.3333):
+        found = release_time(_held_disc(release), 0.03)
+        assert found == pytest.approx(release, abs=0.3 * 0.03), release
+    assert release_time(_held_disc(-0.05), 0.03) is None  # falling from the start: not held
+    assert release_time(_held_disc(5.0), 0.03) is None  # never released

@@ -246,8 +246,27 @@ def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
     for start, release in ((0.0, "0.27"), (0.15, "0.27")):
         with pytest.raises(InputError, match=f"does not move.*about {release} here"):
             load_observation(held, camera=bundle / "camera.json", start=start)
+    # --start auto reads the release from the masks: the same clip as --start 0.3 (to a frame),
+    # and a clip that is not held stays as it is
+    auto = load_observation(held, camera=bundle / "camera.json", start="auto")
+    assert auto.start_s == pytest.approx(0.3, abs=0.03)
+    assert auto.num_frames >= original.num_frames - 1
+    count = min(auto.num_frames, original.num_frames)
+    shift = round((auto.start_s - 0.3) / 0.03)
+    assert (
+        auto.frames[: count - 1] - original.frames[shift : shift + count - 1]
+    ).abs().mean() < 0.01
+    assert load_observation(bundle / "video.mp4", start="auto").start_s == 0.0
+    result, out = _predict([held, "--start", "auto", "--camera", bundle / "camera.json",
+                            "--no-refine", "--preview-frames", "0"], tmp_path, "auto")  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "release read from the masks at 0.3" in result.output
+    read = json.loads((out / "prediction.json").read_text())["input"]
+    assert read["start_how"].startswith("read from the masks") and read["start_s"] > 0.25
     result, out = _predict([held, "--start", "2", "--camera", bundle / "camera.json"], tmp_path)
     assert result.exit_code == 2 and "--start" in result.output and not out.exists()
+    result, out = _predict([held, "--start", "soon"], tmp_path)
+    assert result.exit_code == 2 and "'auto'" in result.output and not out.exists()
     result, out = _predict([held, "--start", "0.3", "--end", "0.1"], tmp_path)
     assert result.exit_code == 2 and "--end" in result.output and not out.exists()
 

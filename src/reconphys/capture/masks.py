@@ -21,6 +21,7 @@ Masks are float [T, H, W] in {0, 1}.
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -191,6 +192,50 @@ def still_frames(masks: Tensor) -> int:
     return int(moved[0]) if len(moved) else masks.shape[0]
 
 
+# --start auto: the release is read from the first frames of the flight after a hold, fitted as
+# the centroid's row y0 + ½ a (t − t_r)² (a drop from rest; a > 0), or, where that fits clearly
+# worse, y0 + v (t − t_r) + ½ a (t − t_r)² (a vertical launch speed v), over the last 3 frames of
+# the hold and the first 5 after it, t_r on a grid of a twentieth of a frame.
+RELEASE_WINDOW = (3, 5)  # frames before / after the first frame that moved off frame 0's mask
+RELEASE_NOISE_PX2 = 0.1  # a mask centroid's squared noise (px²): below it the launch speed is noise
+
+
+def release_time(masks: Tensor, frame_dt: float) -> float | None:
+    """Seconds from frame 0 of masks [T, H, W] to the release of an object held still at first
+    (STILL_FRAMES or more frames overlapping frame 0's mask by IoU ≥ STILL_IOU), or None when it
+    is not held (it moves from the start) or never moves. The object's centroid is at rest until
+    t_r, then falls as ½ a (t − t_r)² from rest, or as v (t − t_r) + ½ a (t − t_r)² with a
+    vertical launch speed where that fits clearly better (a > 0: pixels, rows down): t_r by least
+    squares, to a twentieth of a frame."""
+    still = still_frames(masks)
+    count = masks.shape[0]
+    if still < STILL_FRAMES or still >= count:
+        return None
+    seen = masks.detach().double() > 0.5
+    rows = torch.arange(masks.shape[1], dtype=torch.float64)[:, None]
+    row = (seen * rows).sum((1, 2)) / seen.sum((1, 2)).clamp_min(1)  # [T] centroid rows
+    held = float(row[: still - 2].median())
+    first, last = max(0, still - RELEASE_WINDOW[0]), min(count, still + RELEASE_WINDOW[1])
+    times = torch.arange(first, last, dtype=torch.float64) * frame_dt
+    moved = row[first:last] - held  # [W] pixels from the hold
+    candidates = torch.arange(max(0, still - 4) * 20, still * 20 + 1, dtype=torch.float64)
+    candidates = candidates * frame_dt / 20  # [C] release times tried
+    tau = (times[None] - candidates[:, None]).clamp_min(0)  # [C, W]
+    fits = []  # (least residual, its t_r): from rest (a), then with a launch speed (v, a)
+    for design in (0.5 * tau[..., None] ** 2, torch.stack([tau, 0.5 * tau**2], -1)):
+        normal = design.transpose(1, 2) @ design
+        normal = normal + 1e-9 * torch.eye(normal.shape[-1], dtype=torch.float64)
+        fitted = torch.linalg.solve(normal, design.transpose(1, 2) @ moved[:, None])  # [C, P, 1]
+        residual = ((design @ fitted)[..., 0] - moved).pow(2).sum(1)
+        residual[fitted[:, -1, 0] <= 0] = math.inf  # it must fall: a > 0
+        best = int(residual.argmin())
+        fits.append((float(residual[best]), float(candidates[best])))
+    (rest, at_rest), (launched, at_launch) = fits
+    if math.isfinite(rest) and rest <= 2.0 * launched + RELEASE_NOISE_PX2 * len(moved):
+        return at_rest  # a drop from rest explains it as well: its release is better pinned
+    return at_launch if math.isfinite(launched) else None
+
+
 def check_release(masks: Tensor, source: str, start: float = 0.0, frame_dt: float = 0.03) -> None:
     """Refuse a recording whose object stays still for STILL_FRAMES or more frames from frame 0
     (frame 0 must be the release; the first 1–2 frames of a fall from rest move less than a
@@ -201,6 +246,6 @@ def check_release(masks: Tensor, source: str, start: float = 0.0, frame_dt: floa
         raise InputError(
             f"the object does not move in frames 0–{still - 1} ({still * frame_dt:.2f} s): frame "
             f"0 must be the release; give --start SECONDS (about {release:.2f} here, the time "
-            "in the recording where it is let go)",
+            "in the recording where it is let go), or --start auto to read it from the fall",
             source=source,
         )

@@ -36,6 +36,7 @@ from .masks import (
     check_release,
     read_background,
     read_mask_folder,
+    release_time,
     subtract_background,
 )
 from .video import (
@@ -47,6 +48,7 @@ from .video import (
 )
 
 DATASET_CAMERA = "dataset"  # --camera dataset: the dataset's view 0 (docs/design.md#conventions)
+AUTO_START = "auto"  # --start auto: the release read from the masks (masks.release_time)
 
 
 @dataclass
@@ -65,6 +67,7 @@ class Observation:
     black_backdrop: bool = False  # the object on black, as the plain look of our data
     recording: Tensor | None = None  # [T, H, W, 3] the frames before masking (None: = frames)
     fall_fit_px: float = FALL_FIT_PX  # the masks' pixel error, for reading the fall (calibrate)
+    start_s: float = 0.0  # seconds into the recording of frame 0 (given, or read: --start auto)
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -144,11 +147,17 @@ def load_observation(
     fov_deg: float | None = None,  # vertical field of view for the estimate (None: default)
     fps: float | None = None,  # frame rate of a frame folder / override of the file's
     frame_dt: float = 0.03,
-    start: float = 0.0,  # seconds into the recording: the release (frame 0); before it dropped
+    start: float | str = 0.0,  # seconds into the recording: the release (frame 0); before it
+    # dropped. "auto": read from the masks (an object held still, then falling from rest)
     end: float | None = None,  # seconds into the recording: frames after it dropped
     segment: Callable[[Tensor], Tensor] | None = None,  # frames [T, H, W, 3] → masks [T, H, W]
 ) -> Observation:
     """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input."""
+    auto = start == AUTO_START
+    if auto:
+        start = 0.0
+    elif isinstance(start, str):
+        raise InputError(f"expected seconds or {AUTO_START!r}, got {start!r}", field="--start")
     path = Path(input)
     if not path.exists():
         raise InputError("not found", source=str(path))
@@ -200,6 +209,13 @@ def load_observation(
             black = False
             fit_px = SEGMENTER_FALL_FIT_PX
     check_masks(chosen, str(masks) if masks is not None else str(path))
+    if auto:  # held still first: read the recording again from the release
+        release = release_time(chosen, frame_dt)
+        if release is not None and release > 0:
+            return load_observation(
+                path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
+                fps=fps, frame_dt=frame_dt, start=release, end=end, segment=segment,
+            )  # fmt: skip
     check_release(chosen, str(path), start, frame_dt)
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where it touches or rests
@@ -222,4 +238,5 @@ def load_observation(
         camera_estimate=estimate,
         black_backdrop=black,
         fall_fit_px=fit_px,
+        start_s=start,
     )

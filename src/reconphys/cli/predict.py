@@ -55,8 +55,10 @@ def predict_command(
         None, help="Vertical field of view, degrees, for the estimated camera (default 45)."
     ),
     fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
-    start: float = typer.Option(
-        0.0, help="Seconds into the recording where the object is released (frame 0)."
+    start: str = typer.Option(
+        "0",
+        help="Seconds into the recording where the object is released (frame 0), or 'auto': "
+        "read from the masks (the object held still, then falling from rest).",
     ),
     end: float = typer.Option(None, help="Seconds into the recording to stop reading at."),
     sample: str = typer.Option(None, help="Dataset input: the sample id."),
@@ -102,10 +104,18 @@ def predict_command(
     check_new_output(out, overwrite)
     if fps is not None and not (math.isfinite(fps) and fps > 0):
         raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
-    if not (math.isfinite(start) and start >= 0):
-        raise InputError(f"must be ≥ 0 seconds, got {start}", field="--start")
-    if end is not None and not (math.isfinite(end) and end > start):
-        raise InputError(f"must be after --start ({start:g} s), got {end}", field="--end")
+    if start != "auto":
+        try:
+            start = float(start)
+        except ValueError:
+            raise InputError(
+                f"expected seconds or 'auto', got {start!r}", field="--start"
+            ) from None
+        if not (math.isfinite(start) and start >= 0):
+            raise InputError(f"must be ≥ 0 seconds, got {start}", field="--start")
+    first = 0.0 if start == "auto" else start
+    if end is not None and not (math.isfinite(end) and end > first):
+        raise InputError(f"must be after --start ({first:g} s), got {end}", field="--end")
     if anchors is not None and anchors < 4:
         raise InputError(f"must be ≥ 4, got {anchors}", field="--anchors")
     if fov is not None and not (math.isfinite(fov) and 1 <= fov <= 170):
@@ -148,7 +158,10 @@ def predict_command(
         f"{attributes['friction']:.2f} ({summary['anchors']} anchors, {summary['gaussians']} "
         f"Gaussians; geometry: {summary['geometry']})"
     )
-    estimate = summary.get("input", {}).get("camera_estimate")
+    read = summary.get("input", {})
+    if read.get("start_how", "").startswith("read from the masks"):
+        typer.echo(f"release read from the masks at {read['start_s']:.3f} s: frame 0 from there")
+    estimate = read.get("camera_estimate")
     if estimate is not None:
         low, high = estimate["size_factor_10_90"]
         typer.echo(

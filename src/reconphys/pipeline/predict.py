@@ -174,7 +174,7 @@ def predict(
     camera: str | os.PathLike | None = None,
     fov: float | None = None,
     fps: float | None = None,
-    start: float = 0.0,
+    start: float | str = 0.0,  # seconds into a recording, or "auto" (read from the masks)
     end: float | None = None,
     sample: str | None = None,
     view: int | None = None,
@@ -252,7 +252,8 @@ def predict(
         "frames": observation.num_frames,
         "recorded_frames": observation.recorded_frames,
         "recorded_fps": observation.recorded_fps,
-        "start_s": start,
+        "start_s": round(observation.start_s, 4),
+        "start_how": _start_how(start, observation.start_s),
         "end_s": end,
         "size": list(observation.size),
         "masks": observation.mask_source,
@@ -280,6 +281,15 @@ def predict(
         progress=progress,
         truth=truth,
     )
+
+
+def _start_how(start: float | str, found: float) -> str:
+    """How frame 0's time in the recording was chosen (prediction.json's input.start_how)."""
+    if start == "auto":
+        if found > 0:
+            return "read from the masks: held still, then falling from rest (--start auto)"
+        return "--start auto: the object moves from frame 0 (not held), kept"
+    return "given (--start)" if start else "frame 0 of the recording"
 
 
 def predict_observation(

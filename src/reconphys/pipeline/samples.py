@@ -90,7 +90,7 @@ def load_input(
     fov_deg: float | None = None,  # vertical field of view when the camera is estimated
     sample: str | None = None,  # dataset input: the sample id
     view: int = 0,  # dataset input: the view
-    start: float = 0.0,  # seconds into a recording: its release (frame 0)
+    start: float | str = 0.0,  # seconds into a recording: its release (frame 0), or "auto"
     end: float | None = None,  # seconds into a recording: the frames after it are dropped
 ) -> tuple[Observation, SampleTruth | None]:
     """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
