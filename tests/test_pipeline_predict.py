@@ -18,7 +18,11 @@ from helpers import make_tiny_dataset, train_tiny_gaussian_predictor
 from typer.testing import CliRunner
 
 from reconphys.capture import default_camera, load_observation
-from reconphys.capture.placement import estimate_linear_velocity, fit_to_mask
+from reconphys.capture.placement import (
+    estimate_linear_velocity,
+    fit_to_mask,
+    linear_velocity_fit,
+)
 from reconphys.capture.video import resample_indices, resample_times
 from reconphys.cli import app
 from reconphys.errors import InputError
@@ -336,6 +340,15 @@ def test_linear_velocity_from_a_rendered_free_fall(dataset):
     masks, camera = _rendered_fall(gaussians, velocity)
     estimate = estimate_linear_velocity(gaussians.means, masks, camera, 0.03)
     assert abs(float(estimate[1]) - 0.3) < 0.1 and abs(float(estimate[2]) - 0.8) < 0.15
+    # its standard error, in the camera's axes (x right, y down, along the view): the truth is
+    # within 3 of them on each axis, and the view's axis (read from the mask's growth) is the
+    # least certain
+    fitted, error = linear_velocity_fit(gaussians.means, masks, camera, 0.03)
+    assert torch.equal(fitted, estimate) and (error > 0).all()
+    rotation = camera.world_to_cam[:3, :3].float()
+    off = (rotation @ (fitted - velocity)).abs()
+    assert (off <= 3 * error).all(), (off, error)
+    assert float(error[2]) > float(error[:2].max())
 
 
 def test_velocity_along_the_view_is_read_from_the_growing_mask(dataset):

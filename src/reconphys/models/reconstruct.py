@@ -19,14 +19,20 @@ from ..assets.build import build_from_gaussians
 from ..assets.gaussians import Gaussians
 from ..capture import Observation
 from ..capture.calibrate import object_depth
-from ..capture.placement import estimate_linear_velocity, ray
+from ..capture.placement import linear_velocity_fit, ray
 from ..errors import InputError
 from .model_input import frame_crop, predictor_frames, virtual_intrinsics
 
 
 def initial_velocity(gaussians: Gaussians, observation: Observation) -> Tensor:  # [3] m/s
     """The initial linear velocity of ``gaussians`` (world frame) from the masks' free fall."""
-    return estimate_linear_velocity(
+    return initial_velocity_fit(gaussians, observation)[0]
+
+
+def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tuple[Tensor, Tensor]:
+    """(velocity [3] m/s world frame, its standard error [3] m/s along the camera's x right,
+    y down and viewing axes) from the masks' free fall (capture.placement.linear_velocity_fit)."""
+    return linear_velocity_fit(
         gaussians.means, observation.masks, observation.camera, observation.frame_dt
     )
 

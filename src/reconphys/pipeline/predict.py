@@ -20,6 +20,7 @@ The asset is written by :func:`write_outputs` (``write`` and ``preview`` timings
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import time
 from dataclasses import dataclass, field, replace
@@ -40,14 +41,20 @@ from ..models.gaussian_shipped import (
 from ..models.model_input import network_input
 from ..models.physics_predictor import observable_spread
 from ..models.reconstruct import (
-    initial_velocity,
+    initial_velocity_fit,
     object_distance,
     observed_asset,
     predicted_gaussians,
 )
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
-from .search import NETWORK_SPREAD_FACTOR, OBSERVABLES, network_intervals, observables
+from .search import (
+    NETWORK_SPREAD_FACTOR,
+    OBSERVABLES,
+    Z_10_90,
+    network_intervals,
+    observables,
+)
 
 PLACEMENTS = ("auto", "as-is", "fit")
 GROUNDS = ("camera", "landed")
@@ -352,9 +359,17 @@ def predict_observation(
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
         object_id = f"predicted-{Path(observation.source).stem}"
     if build_new:
-        velocity = initial_velocity(placed, observation)
+        velocity, error = initial_velocity_fit(placed, observation)
+        estimate = observation.camera_estimate
+        if estimate is not None:  # metres per second scale with the depth read from the fall
+            spread = math.log(estimate["size_factor_10_90"][1]) / Z_10_90
+            across = observation.camera.world_to_cam[:3, :3].to(velocity) @ velocity
+            error = (error**2 + (spread * across) ** 2).sqrt()
         details["initial_velocity"] = {
             "linear_m_s": [round(float(x), 4) for x in velocity],
+            # its standard error along the camera's x (right), y (down) and viewing axes (with
+            # the size's when the camera is read from the video)
+            "linear_sd_camera_axes_m_s": [round(float(x), 4) for x in error],
             "angular_rad_s": [0.0, 0.0, 0.0],
             "how": "free fall of the mask's centroid and growth of its area over frames 0–3 "
             "(angular velocity not estimated)",
