@@ -29,7 +29,7 @@ import torch
 
 from reconphys.capture.camera import CameraSpec
 from reconphys.capture.masks import subtract_background
-from reconphys.capture.placement import estimate_linear_velocity
+from reconphys.capture.placement import linear_velocity_fit
 from reconphys.capture.video import read_video
 from reconphys.data import DropDataset
 from reconphys.geometry import rigid_velocity
@@ -78,7 +78,7 @@ def main() -> None:
         else:
             masks = subtract_background(frames)
         true_motion = torch.tensor(state["linear_velocity"] + state["angular_velocity"])
-        velocity = estimate_linear_velocity(asset.gaussians.means, masks, camera, 0.03)
+        velocity = linear_velocity_fit(asset.gaussians.means, masks, camera, 0.03)[0]
         start = replace(asset.physics, stiffness=asset.physics.stiffness / 8,
                         damping=asset.physics.damping * 3, friction=0.5)  # fmt: skip
         true_values = observables(asset.physics)

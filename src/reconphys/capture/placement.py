@@ -5,7 +5,7 @@ and the ground, from the camera and the masks alone (no optimisation through the
 - :func:`fit_to_mask`: keep the Gaussians' orientation and size, move them so their rendered
   silhouette covers the first frame's mask box (depth from the apparent size, then the ray
   through the box centre); :func:`silhouette_iou` says how well a placement matches.
-- :func:`estimate_linear_velocity` / :func:`linear_velocity_fit`: the free-fall motion of the mask
+- :func:`linear_velocity_fit`: the free-fall motion of the mask
   centroid over the first frames (before any contact) → a linear velocity in m/s by least squares
   (and its standard error); the angular velocity is
   not estimated (0). The component along the viewing direction is weakly observed (it only
@@ -169,18 +169,6 @@ def fit_to_mask(
 def _centroid(mask: Tensor) -> Tensor:
     v, u = torch.nonzero(mask > 0.5, as_tuple=True)
     return torch.stack([u.double().mean() + 0.5, v.double().mean() + 0.5])
-
-
-def estimate_linear_velocity(
-    means: Tensor,  # [N, 3] the object at frame 0, world frame
-    masks: Tensor,  # [T, H, W]
-    camera: CameraSpec,
-    frame_dt: float,
-    frames: int = 4,  # frames 0..frames−1 are used (before contact for the dataset's drops)
-    prior_speed: float = VELOCITY_PRIOR_M_S,  # m/s: a weakly observed component shrinks to 0
-) -> Tensor:  # [3] m/s
-    """The velocity of :func:`linear_velocity_fit`, without its standard error."""
-    return linear_velocity_fit(means, masks, camera, frame_dt, frames, prior_speed)[0]
 
 
 def linear_velocity_fit(
