@@ -1,5 +1,5 @@
-"""Shared benchmark helpers: a description of the machine, CUDA-aware timing, and the mean
-mask IoU of a clip."""
+"""Shared benchmark helpers: a description of the machine, CUDA-aware timing, the mean mask IoU
+of a clip, and a dataset's samples after its first objects (a validation split)."""
 
 from __future__ import annotations
 
@@ -59,3 +59,14 @@ def mean_mask_iou(prediction: torch.Tensor, truth: torch.Tensor) -> float:
     """IoU of two [T, H, W] masks (> 0.5), per frame, averaged over the frames."""
     p, t = prediction > 0.5, truth > 0.5
     return float(((p & t).sum((1, 2)) / (p | t).sum((1, 2)).clamp_min(1)).mean())
+
+
+def after_first_objects(
+    samples: list[dict], count: int, order: list[dict] | None = None
+) -> list[dict]:
+    """``samples`` less those of the first ``count`` objects of ``order`` (default: of
+    ``samples`` itself), in the order they are listed: the meshes a model trained on the first
+    ``count`` (``data.objects``) never saw."""
+    listed = samples if order is None else order
+    first = set(list(dict.fromkeys(s["object"] for s in listed))[:count])
+    return [s for s in samples if s["object"] not in first]

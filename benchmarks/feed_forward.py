@@ -27,6 +27,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import torch
+from common import after_first_objects
 from PIL import Image, ImageDraw
 
 from reconphys.data.dataset import DropDataset
@@ -106,13 +107,12 @@ def main() -> None:
         predictor = load_predictor(model)
         dataset = DropDataset(args.data, args.split, views=[predictor.view])
         if args.after_objects:
-            order = dataset.samples
+            order = None
             if args.objects_of is not None:
                 order = [
                     s for s in read_manifest(args.objects_of)["samples"] if s["split"] == "train"
                 ]
-            first = set(list(dict.fromkeys(s["object"] for s in order))[: args.after_objects])
-            dataset.samples = [s for s in dataset.samples if s["object"] not in first]
+            dataset.samples = after_first_objects(dataset.samples, args.after_objects, order)
         started = time.perf_counter()
         rows = []
         for index in range(len(dataset)):

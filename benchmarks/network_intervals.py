@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from common import after_first_objects
 from feed_forward import observables_of
 from scipy.stats import spearmanr
 
@@ -54,8 +55,7 @@ def main() -> None:
     predictor = load_predictor(args.model)
     dataset = DropDataset(args.data, args.split, views=[predictor.view])
     if args.after_objects:
-        first = set(list(dict.fromkeys(s["object"] for s in dataset.samples))[: args.after_objects])
-        dataset.samples = [s for s in dataset.samples if s["object"] not in first]
+        dataset.samples = after_first_objects(dataset.samples, args.after_objects)
     realistic = read_manifest(args.data)["parsed_settings"].scene != "plain"
     segmenter = load_mask_segmenter() if realistic and args.masks == "segmenter" else None
     errors, spreads = [], []
@@ -64,8 +64,10 @@ def main() -> None:
         item = dataset[index]
         frames = item["frames"][0]
         if realistic:
-            masks = dataset.masks(index)[0].float() if segmenter is None else None
-            masks = segment_clip(segmenter, frames) if masks is None else masks
+            if segmenter is None:
+                masks = dataset.masks(index)[0].float()
+            else:
+                masks = segment_clip(segmenter, frames)
             frames = frames * masks[..., None]
         with torch.no_grad():
             out = predictor.predict(frames[None])

@@ -40,10 +40,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from common import after_first_objects
 
 import reconphys
 from reconphys.assets.ply import write_ply
 from reconphys.capture import CameraSpec, write_camera
+from reconphys.capture.masks import subtract_background
 from reconphys.data import DropDataset
 from reconphys.data.storage import video_name
 from reconphys.errors import InputError
@@ -82,8 +84,7 @@ def main() -> None:
     root = Path(args.data)
     dataset = DropDataset(root, split=args.split, views=[0])
     if args.after_objects:
-        first = set(list(dict.fromkeys(s["object"] for s in dataset.samples))[: args.after_objects])
-        dataset.samples = [s for s in dataset.samples if s["object"] not in first]
+        dataset.samples = after_first_objects(dataset.samples, args.after_objects)
     midpoints = {k: 0.5 * (lo + hi) for k, (lo, hi) in ATTRIBUTE_RANGES.items()}
     trivial = observables(midpoints)
     rows = []
@@ -102,7 +103,7 @@ def main() -> None:
             write_ply(bundle / "gaussians.ply", dataset.asset(index).gaussians)
             truth = observables(meta["attributes"])
             if dataset.settings.scene == "plain":  # the object on black: its stored frames say
-                masks = item["frames"][0].amax(-1) > 0
+                masks = subtract_background(item["frames"][0]) > 0.5
             else:
                 masks = dataset.masks(index)[0]  # [T, H, W] bool, view 0
             if "masks_dir" in configs:

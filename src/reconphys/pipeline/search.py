@@ -36,7 +36,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
-from statistics import NormalDist
 
 import torch
 from torch import Tensor
@@ -44,6 +43,7 @@ from torch import Tensor
 from ..assets.asset import Asset
 from ..assets.gaussians import SH_C0, Gaussians
 from ..capture import CameraSpec
+from ..capture.calibrate import Z_10_90  # the normal's 90 % quantile (QUANTILES[1])
 from ..capture.window import comparison_view, object_window
 from ..geometry import rigid_velocity
 from ..physics import SpringMassModel, State, deform_means, rollout, scene_stable_substeps
@@ -86,7 +86,6 @@ TEMPERATURE_PIXELS = (1000.0, 1500.0, 500.0)  # log k/m, log d/m, friction
 # first folder; docs/usage.md "Realistic recordings end to end".
 PREDICTED_GEOMETRY_TEMPERATURE = 4.0
 QUANTILES = (0.1, 0.9)
-Z_10_90 = NormalDist().inv_cdf(QUANTILES[1])  # 1.2816
 # The network's own belief about each observable: a normal distribution at the ensemble's mean
 # answer, σ = this × the members' standard deviation (models.physics_predictor.observable_spread),
 # per observable (log k/m, log d/m, f). The seeds' spread tracks the error only loosely (rank
