@@ -218,6 +218,31 @@ def test_a_double_rate_video_is_resampled_to_frame_dt(bundle, tmp_path):
     assert (resampled.frames - original.frames).abs().mean() < 0.02
 
 
+def test_a_long_large_recording_is_read_as_a_clip_at_the_working_size(bundle, tmp_path):
+    from reconphys.capture.observation import CLIP_FRAMES
+    from reconphys.capture.video import WORK_MAX_SIDE
+
+    frames = np.stack(imageio.mimread(bundle / "video.mp4"))  # [30, H, W, 3]
+    factor = WORK_MAX_SIDE // frames.shape[1] + 4  # larger than the working size
+    large = frames.repeat(factor, 1).repeat(factor, 2)
+    still = np.repeat(large[-1:], 40, 0)  # the object at rest for 1.3 s more: a phone clip
+    path = tmp_path / "long.mp4"
+    imageio.mimwrite(path, list(np.concatenate([large, still])), fps=1 / 0.03, quality=8)
+    original = load_observation(bundle / "video.mp4", camera=bundle / "camera.json")
+    read = load_observation(path, camera=bundle / "camera.json")
+    assert read.num_frames == CLIP_FRAMES and read.recorded_frames <= CLIP_FRAMES + 1
+    side = large.shape[1]
+    assert read.recorded_size == (side, side) and read.size == (WORK_MAX_SIDE, WORK_MAX_SIDE)
+    scale = WORK_MAX_SIDE / frames.shape[1]
+    assert torch.allclose(
+        read.camera.K, original.camera.K * torch.tensor([scale, scale, 1.0])[:, None]
+    )
+    for a, b in zip(original.masks, read.masks, strict=True):  # the same object, 20× the pixels
+        centre_a = torch.nonzero(a > 0.5).double().mean(0) + 0.5
+        centre_b = torch.nonzero(b > 0.5).double().mean(0) + 0.5
+        assert (centre_b / scale - centre_a).abs().max() < 0.3
+
+
 def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
     assert resample_indices(100, 1 / 0.03, 0.03, start=0.3).tolist() == list(range(10, 100))
     assert resample_indices(100, 1 / 0.03, 0.03, 0.3, end=0.9).tolist() == list(range(10, 31))

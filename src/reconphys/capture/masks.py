@@ -30,7 +30,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from .video import list_images, read_image
+from .video import fit_within, list_images, read_image
 
 DEFAULT_TOLERANCE = 0.08  # colour distance (RGB in [0, 1], Euclidean) that counts as object
 BORDER = 2  # pixels of the image border that sample the backdrop colour
@@ -49,10 +49,11 @@ def read_mask_folder(folder: str | os.PathLike, num_frames: int, height: int, wi
         image = read_image(path)
         channel = image[..., 3] if image.shape[-1] == 4 else image.max(axis=-1)
         mask = torch.from_numpy((channel > 127).astype(np.float32))
-        if mask.shape != (height, width):
+        if mask.shape != (height, width):  # area-averaged (a larger recording read smaller)
             mask = torch.nn.functional.interpolate(
-                mask[None, None], size=(height, width), mode="nearest"
+                mask[None, None], size=(height, width), mode="area"
             )[0, 0]
+            mask = (mask >= 0.5).float()
         masks.append(mask)
     return torch.stack(masks)
 
@@ -103,15 +104,24 @@ def subtract_background(
     return (distance > tolerance).float()
 
 
-def read_background(path: str | os.PathLike, height: int, width: int) -> Tensor:
-    """A clean plate image → [H, W, 3] float in [0, 1] at the frames' size."""
+def read_background(
+    path: str | os.PathLike,
+    height: int,
+    width: int,
+    recorded: tuple[int, int] | None = None,  # (width, height) of the recording, if not read so
+) -> Tensor:
+    """A clean plate image → [H, W, 3] float in [0, 1] at the frames' size: of the frames as
+    read, or of the recording (then area-averaged to the frames' as they were)."""
     image = read_image(Path(path))[..., :3]
     if image.shape[-1] == 1:
         image = np.repeat(image, 3, axis=-1)
+    if recorded is not None and image.shape[:2] == (recorded[1], recorded[0]):
+        image = fit_within(image[None], max(height, width))[0]
     plate = torch.from_numpy(image.astype(np.float32) / 255.0)
     if plate.shape[:2] != (height, width):
+        size = recorded or (width, height)
         raise InputError(
-            f"is {plate.shape[1]}×{plate.shape[0]} pixels, the frames {width}×{height}",
+            f"is {image.shape[1]}×{image.shape[0]} pixels, the frames {size[0]}×{size[1]}",
             source=str(path),
         )
     return plate

@@ -8,7 +8,8 @@ INPUT is one of:
 A dataset sample (its stored frames, camera and truth) is read by
 :func:`reconphys.pipeline.samples.load_sample`; :func:`stored_observation` wraps its frames.
 
-Frames are resampled in time to ``frame_dt`` (nearest recorded frame) from ``start`` seconds into
+Frames are resampled in time to ``frame_dt`` (a recorded frame where one falls on the time, else
+made between the two nearest: :mod:`.interpolate`) from ``start`` seconds into
 the recording (the release: frame 0; the frames before it are dropped) to ``end``, masked
 (background set to black, as in the synthetic renders the models were trained on) and kept at
 their size.
@@ -16,6 +17,7 @@ their size.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -28,6 +30,7 @@ from torch import Tensor
 from ..errors import InputError
 from .calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX, estimate_camera
 from .camera import CameraSpec, default_camera, read_camera
+from .interpolate import frames_between
 from .masks import (
     alpha_masks,
     backdrop_colour,
@@ -41,14 +44,19 @@ from .masks import (
 )
 from .video import (
     VIDEO_SUFFIXES,
+    WORK_MAX_SIDE,
+    fit_within,
     read_frame_folder,
     read_video,
-    resample_indices,
+    resample_between,
     resample_times,
 )
 
 DATASET_CAMERA = "dataset"  # --camera dataset: the dataset's view 0 (docs/design.md#conventions)
 AUTO_START = "auto"  # --start auto: the release read from the masks (masks.release_time)
+CLIP_FRAMES = 30  # frames read from the release when no end is given: the data's clips (0.87 s)
+AUTO_SEARCH_S = 10.0  # --start auto looks for the release in this many seconds from the start
+AUTO_MAX_SIDE = 256  # ... at most this many pixels a side (only the masks' centroids are read)
 
 
 @dataclass
@@ -68,6 +76,8 @@ class Observation:
     recording: Tensor | None = None  # [T, H, W, 3] the frames before masking (None: = frames)
     fall_fit_px: float = FALL_FIT_PX  # the masks' pixel error, for reading the fall (calibrate)
     start_s: float = 0.0  # seconds into the recording of frame 0 (given, or read: --start auto)
+    time_resampling: str = "the recorded frames"  # how frames at frame_dt were made (video.py)
+    recorded_size: tuple[int, int] | None = None  # (width, height) as filmed (None: = size)
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -149,7 +159,8 @@ def load_observation(
     frame_dt: float = 0.03,
     start: float | str = 0.0,  # seconds into the recording: the release (frame 0); before it
     # dropped. "auto": read from the masks (an object held still, then falling from rest)
-    end: float | None = None,  # seconds into the recording: frames after it dropped
+    end: float | None = None,  # seconds into the recording: frames after it dropped (None:
+    # CLIP_FRAMES frames from the start, as long as the data's clips; the rest is not decoded)
     segment: Callable[[Tensor], Tensor] | None = None,  # frames [T, H, W, 3] → masks [T, H, W]
 ) -> Observation:
     """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input."""
@@ -163,21 +174,33 @@ def load_observation(
         raise InputError("not found", source=str(path))
     if path.is_dir() and (path / "manifest.json").is_file():
         raise InputError("a dataset folder: give the sample with --sample ID", source=str(path))
+    read_end = end
+    if end is None:  # a phone clip runs on for seconds after the object rests: not read
+        read_end = AUTO_SEARCH_S if auto else start + (CLIP_FRAMES - 0.5) * frame_dt
+    # decode no further than that, unless a mask folder must match the recording frame for frame
+    until = None if masks is not None else read_end
     times = None
     if path.is_dir():
-        raw, recorded_fps = read_frame_folder(path), None
+        count = None if until is None else math.ceil(until * (fps or 1.0 / frame_dt)) + 1
+        raw, recorded_fps = read_frame_folder(path, count), None
     elif path.suffix.lower() in VIDEO_SUFFIXES:
-        raw, recorded_fps, times = read_video(path)
+        raw, recorded_fps, times = read_video(path, until=None if fps else until)
     else:
         raise InputError(
             f"expected a video ({', '.join(VIDEO_SUFFIXES)}) or a folder of frames",
             source=str(path),
         )
     if times is not None and fps is None:  # variable frame rate (GIF): the display times
-        picks = resample_times(times, frame_dt, start, end)
-    else:
+        before = resample_times(times, frame_dt, start, read_end)
+        after, weight = before, np.zeros(len(before))
+    else:  # between two recorded frames where the rates differ (30 fps: interpolate.py)
         rate = fps or recorded_fps or 1.0 / frame_dt
-        picks = resample_indices(raw.shape[0], rate, frame_dt, start, end)
+        before, after, weight = resample_between(raw.shape[0], rate, frame_dt, start, read_end)
+    between = weight > 0
+    # the recorded frames used: each wanted one's, or the pairs it lies between
+    picks = np.unique(np.concatenate([before, after])) if between.any() else before
+    recorded_size = (raw.shape[2], raw.shape[1])  # (width, height) as filmed
+    raw = fit_within(raw, AUTO_MAX_SIDE if auto else WORK_MAX_SIDE)  # a phone's 1080p: smaller
     height, width = raw.shape[1:3]
     black = False  # the object on a black backdrop (the plain look): read from the border below
     if masks is not None:
@@ -196,7 +219,8 @@ def load_observation(
     if all_masks is not None:
         chosen = all_masks[torch.from_numpy(picks)]
     elif background is not None:
-        chosen = subtract_background(rgb, read_background(background, height, width))
+        plate = read_background(background, height, width, recorded_size)
+        chosen = subtract_background(rgb, plate)
         mask_source = f"background subtraction (clean plate {background})"
     else:
         colour = backdrop_colour(rgb)
@@ -208,14 +232,25 @@ def load_observation(
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
             black = False
             fit_px = SEGMENTER_FALL_FIT_PX
+    objects = rgb * chosen[..., None]
+    if between.any():
+        position = {int(i): n for n, i in enumerate(picks)}
+        rgb, chosen, objects = frames_between(
+            rgb, chosen, *(np.array([position[i] for i in x]) for x in (before, after)), weight
+        )
+    time_resampling = (
+        f"between the two nearest recorded frames ({int(between.sum())} of {len(weight)}: "
+        "motion-compensated)"
+        if between.any()
+        else "the recorded frames"
+    )
     check_masks(chosen, str(masks) if masks is not None else str(path))
-    if auto:  # held still first: read the recording again from the release
+    if auto:  # held still first: read the recording again from the release (or the start)
         release = release_time(chosen, frame_dt)
-        if release is not None and release > 0:
-            return load_observation(
-                path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
-                fps=fps, frame_dt=frame_dt, start=release, end=end, segment=segment,
-            )  # fmt: skip
+        return load_observation(
+            path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
+            fps=fps, frame_dt=frame_dt, start=release or 0.0, end=end, segment=segment,
+        )  # fmt: skip
     check_release(chosen, str(path), start, frame_dt)
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where it touches or rests
@@ -224,10 +259,10 @@ def load_observation(
     elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
         spec = default_camera(width, height)
     else:
-        spec = read_camera(camera, width, height)
+        spec = read_camera(camera, *recorded_size).resized(width, height)
     return Observation(
         recording=rgb,
-        frames=rgb * chosen[..., None],
+        frames=objects,
         masks=chosen,
         camera=spec,
         frame_dt=frame_dt,
@@ -239,4 +274,6 @@ def load_observation(
         black_backdrop=black,
         fall_fit_px=fit_px,
         start_s=start,
+        time_resampling=time_resampling,
+        recorded_size=recorded_size,
     )

@@ -3,6 +3,7 @@ plugins) or a folder of frames, and resampling it in time to the simulator's ``f
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -59,9 +60,12 @@ def _read_gif(path: Path) -> tuple[list[np.ndarray], np.ndarray]:
     return frames, np.concatenate([[0.0], np.cumsum(durations)])
 
 
-def read_video(path: str | os.PathLike) -> tuple[np.ndarray, float | None, np.ndarray | None]:
-    """All frames of a video file → ([T, H, W, 3|4] uint8, frames per second or None, display
-    times [T + 1] seconds for variable-rate files (GIF) or None).
+def read_video(
+    path: str | os.PathLike, until: float | None = None
+) -> tuple[np.ndarray, float | None, np.ndarray | None]:
+    """The frames of a video file → ([T, H, W, 3|4] uint8, frames per second or None, display
+    times [T + 1] seconds for variable-rate files (GIF) or None). ``until`` (seconds): stop
+    decoding after the first frame at or past it (a long phone clip is not held in memory).
 
     GIF keeps its alpha channel when it has transparency. Raises InputError (one line naming the
     file) for a missing or unreadable file and for a video without frames.
@@ -81,8 +85,13 @@ def read_video(path: str | os.PathLike) -> tuple[np.ndarray, float | None, np.nd
         else:
             with imageio.get_reader(path, format="FFMPEG") as reader:
                 fps = reader.get_meta_data().get("fps")
+                last = None
+                if until is not None and fps and np.isfinite(fps) and fps > 0:
+                    last = math.ceil(until * fps - 1e-6)  # the first frame at or past `until`
                 for frame in reader:
                     frames.append(_as_rgb_or_rgba(frame, source))
+                    if last is not None and len(frames) > last:
+                        break
     except InputError:
         raise
     except Exception as e:  # decoders raise many types (OSError, RuntimeError, IndexError, ...)
@@ -95,6 +104,39 @@ def read_video(path: str | os.PathLike) -> tuple[np.ndarray, float | None, np.nd
         raise InputError("frames of different sizes", source=source)
     fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
     return np.stack(frames), fps, times
+
+
+ON_FRAME_S = 1e-3  # a wanted time this close to a recorded frame reads that frame as it is
+# A recording is read at most this many pixels on its longer side (area-averaged down): every
+# model reads far less (the segmenter 128 px, the crops 32–48 px, the search 64 px), and a 1080p
+# clip at full size costs gigabytes and minutes (docs/usage.md#the-input).
+WORK_MAX_SIDE = 640
+
+
+def working_size(width: int, height: int, max_side: int = WORK_MAX_SIDE) -> tuple[int, int]:
+    """(width, height) of a ``width × height`` image read at most ``max_side`` px a side."""
+    scale = max_side / max(width, height)
+    if scale >= 1:
+        return width, height
+    return max(1, round(width * scale)), max(1, round(height * scale))
+
+
+def fit_within(images: np.ndarray, max_side: int = WORK_MAX_SIDE) -> np.ndarray:
+    """[T, H, W, C] uint8 → the same, area-averaged to :func:`working_size` (unchanged when it
+    fits), one image at a time."""
+    import torch
+    import torch.nn.functional as F
+
+    height, width = images.shape[1:3]
+    size = working_size(width, height, max_side)
+    if size == (width, height):
+        return images
+    out = np.empty((images.shape[0], size[1], size[0], images.shape[3]), dtype=np.uint8)
+    for t, image in enumerate(images):
+        x = torch.from_numpy(image).permute(2, 0, 1)[None].float()
+        x = F.interpolate(x, size=(size[1], size[0]), mode="area")
+        out[t] = x[0].permute(1, 2, 0).round().clamp(0, 255).byte().numpy()
+    return out
 
 
 def resample_times(
@@ -148,8 +190,9 @@ def read_image(path: Path) -> np.ndarray:
     return image if image.ndim == 3 else image[..., None]
 
 
-def read_frame_folder(folder: str | os.PathLike) -> np.ndarray:
-    """A folder of frame images (sorted naturally) → [T, H, W, 3|4] uint8."""
+def read_frame_folder(folder: str | os.PathLike, count: int | None = None) -> np.ndarray:
+    """A folder of frame images (sorted naturally) → [T, H, W, 3|4] uint8; the first ``count``
+    of them when given."""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError("frame folder not found", source=str(folder))
@@ -157,6 +200,7 @@ def read_frame_folder(folder: str | os.PathLike) -> np.ndarray:
     if not files:
         kinds = "/".join(IMAGE_SUFFIXES)
         raise InputError(f"no frames ({kinds}) in the folder", source=str(folder))
+    files = files[:count]
     frames = _same_channels([_as_rgb_or_rgba(read_image(p), str(p)) for p in files])
     shapes = {f.shape for f in frames}
     if len(shapes) != 1:
@@ -164,17 +208,35 @@ def read_frame_folder(folder: str | os.PathLike) -> np.ndarray:
     return np.stack(frames)
 
 
-def resample_indices(
+def resample_between(
     num_frames: int, fps: float, frame_dt: float, start: float = 0.0, end: float | None = None
-) -> np.ndarray:
-    """Indices of the recorded frames nearest to the times start, start + frame_dt, ... (seconds
-    into the recording, as long as they lie inside it and before ``end``); identity when
-    ``fps == 1 / frame_dt`` and ``start == 0``."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The times start, start + frame_dt, ... (seconds into a recording of ``num_frames`` at
+    ``fps``, as long as they lie inside it and before ``end``) between recorded frames:
+    ``(before [J], after [J], weight [J])``, the frame at or before each time, the one after, and
+    the share of the later one in [0, 1). A time within :data:`ON_FRAME_S` of a recorded frame
+    takes it alone (before = after, weight 0): a recording at 1 / ``frame_dt`` (or a multiple)
+    reads exactly its own frames. At 30 fps the times fall between frames; reading the nearest
+    one instead would put each frame up to 17 ms off its time (5 cm at 3 m/s)."""
     if not (np.isfinite(fps) and fps > 0):
         raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
     duration = (num_frames - 1) / fps
     stop = duration if end is None else min(end, duration)
     _check_span(start, stop + 1e-9)
     count = int(np.floor((stop - start) / frame_dt + 1e-6)) + 1
-    times = start + np.arange(count) * frame_dt
-    return np.clip(np.round(times * fps).astype(np.int64), 0, num_frames - 1)
+    position = (start + np.arange(count) * frame_dt) * fps  # [J] in recorded frames
+    nearest = np.round(position)
+    on_frame = np.abs(position - nearest) < ON_FRAME_S * fps
+    before = np.where(on_frame, nearest, np.floor(position)).astype(np.int64)
+    before = np.clip(before, 0, num_frames - 1)
+    after = np.where(on_frame, before, np.minimum(before + 1, num_frames - 1))
+    weight = np.where(on_frame | (after == before), 0.0, position - before)
+    return before, after, weight
+
+
+def resample_indices(
+    num_frames: int, fps: float, frame_dt: float, start: float = 0.0, end: float | None = None
+) -> np.ndarray:
+    """The recorded frame nearest to each time of :func:`resample_between` [J]."""
+    before, after, weight = resample_between(num_frames, fps, frame_dt, start, end)
+    return np.where(weight < 0.5, before, after)

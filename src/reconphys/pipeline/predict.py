@@ -259,10 +259,12 @@ def predict(
         "frames": observation.num_frames,
         "recorded_frames": observation.recorded_frames,
         "recorded_fps": observation.recorded_fps,
+        "time_resampling": observation.time_resampling,
         "start_s": round(observation.start_s, 4),
         "start_how": _start_how(start, observation.start_s),
         "end_s": end,
-        "size": list(observation.size),
+        "size": list(observation.size),  # as read (at most WORK_MAX_SIDE a side)
+        "recorded_size": list(observation.recorded_size or observation.size),
         "masks": observation.mask_source,
         "camera": observation.camera.source,
         "ground_height": observation.camera.ground_height,
