@@ -45,7 +45,6 @@ from .masks import (
 from .video import (
     VIDEO_SUFFIXES,
     WORK_MAX_SIDE,
-    fit_within,
     read_frame_folder,
     read_video,
     resample_between,
@@ -179,12 +178,13 @@ def load_observation(
         read_end = AUTO_SEARCH_S if auto else start + (CLIP_FRAMES - 0.5) * frame_dt
     # decode no further than that, unless a mask folder must match the recording frame for frame
     until = None if masks is not None else read_end
+    side = AUTO_MAX_SIDE if auto else WORK_MAX_SIDE  # a phone's 1080p: read smaller
     times = None
     if path.is_dir():
         count = None if until is None else math.ceil(until * (fps or 1.0 / frame_dt)) + 1
-        raw, recorded_fps = read_frame_folder(path, count), None
+        (raw, recorded_size), recorded_fps = read_frame_folder(path, count, side), None
     elif path.suffix.lower() in VIDEO_SUFFIXES:
-        raw, recorded_fps, times = read_video(path, until=None if fps else until)
+        raw, recorded_fps, times, recorded_size = read_video(path, None if fps else until, side)
     else:
         raise InputError(
             f"expected a video ({', '.join(VIDEO_SUFFIXES)}) or a folder of frames",
@@ -199,8 +199,6 @@ def load_observation(
     between = weight > 0
     # the recorded frames used: each wanted one's, or the pairs it lies between
     picks = np.unique(np.concatenate([before, after])) if between.any() else before
-    recorded_size = (raw.shape[2], raw.shape[1])  # (width, height) as filmed
-    raw = fit_within(raw, AUTO_MAX_SIDE if auto else WORK_MAX_SIDE)  # a phone's 1080p: smaller
     height, width = raw.shape[1:3]
     black = False  # the object on a black backdrop (the plain look): read from the border below
     if masks is not None:

@@ -61,11 +61,13 @@ def _read_gif(path: Path) -> tuple[list[np.ndarray], np.ndarray]:
 
 
 def read_video(
-    path: str | os.PathLike, until: float | None = None
-) -> tuple[np.ndarray, float | None, np.ndarray | None]:
+    path: str | os.PathLike, until: float | None = None, max_side: int | None = None
+) -> tuple[np.ndarray, float | None, np.ndarray | None, tuple[int, int]]:
     """The frames of a video file → ([T, H, W, 3|4] uint8, frames per second or None, display
-    times [T + 1] seconds for variable-rate files (GIF) or None). ``until`` (seconds): stop
-    decoding after the first frame at or past it (a long phone clip is not held in memory).
+    times [T + 1] seconds for variable-rate files (GIF) or None, (width, height) as recorded).
+    ``until`` (seconds): stop decoding after the first frame at or past it; ``max_side``: each
+    frame area-averaged to at most that many pixels a side as it is decoded (:func:`fit_within`)
+    — a long 1080p phone clip is never held in memory whole.
 
     GIF keeps its alpha channel when it has transparency. Raises InputError (one line naming the
     file) for a missing or unreadable file and for a video without frames.
@@ -77,11 +79,18 @@ def read_video(
     if not path.is_file():
         raise InputError("video file not found", source=source)
     fps, times = None, None
-    frames = []
+    frames, sizes = [], set()
+
+    def keep(frame: np.ndarray) -> None:
+        frame = _as_rgb_or_rgba(frame, source)
+        sizes.add((frame.shape[1], frame.shape[0]))
+        frames.append(frame if max_side is None else fit_within(frame[None], max_side)[0])
+
     try:
         if path.suffix.lower() == ".gif":
             raw, times = _read_gif(path)
-            frames = [_as_rgb_or_rgba(frame, source) for frame in raw]
+            for frame in raw:
+                keep(frame)
         else:
             with imageio.get_reader(path, format="FFMPEG") as reader:
                 fps = reader.get_meta_data().get("fps")
@@ -89,7 +98,7 @@ def read_video(
                 if until is not None and fps and np.isfinite(fps) and fps > 0:
                     last = math.ceil(until * fps - 1e-6)  # the first frame at or past `until`
                 for frame in reader:
-                    frames.append(_as_rgb_or_rgba(frame, source))
+                    keep(frame)
                     if last is not None and len(frames) > last:
                         break
     except InputError:
@@ -99,11 +108,11 @@ def read_video(
         raise InputError(f"cannot decode the video ({message})", source=source) from None
     if not frames:
         raise InputError("the video has no frames", source=source)
-    frames = _same_channels(frames)
-    if len({f.shape for f in frames}) != 1:
+    if len(sizes) != 1:
         raise InputError("frames of different sizes", source=source)
+    frames = _same_channels(frames)
     fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
-    return np.stack(frames), fps, times
+    return np.stack(frames), fps, times, sizes.pop()
 
 
 ON_FRAME_S = 1e-3  # a wanted time this close to a recorded frame reads that frame as it is
@@ -122,21 +131,20 @@ def working_size(width: int, height: int, max_side: int = WORK_MAX_SIDE) -> tupl
 
 
 def fit_within(images: np.ndarray, max_side: int = WORK_MAX_SIDE) -> np.ndarray:
-    """[T, H, W, C] uint8 → the same, area-averaged to :func:`working_size` (unchanged when it
-    fits), one image at a time."""
-    import torch
-    import torch.nn.functional as F
+    """[T, H, W, C] uint8 → the same, area-averaged (box filter) to :func:`working_size`;
+    unchanged when it fits."""
+    from PIL import Image
 
     height, width = images.shape[1:3]
     size = working_size(width, height, max_side)
     if size == (width, height):
         return images
-    out = np.empty((images.shape[0], size[1], size[0], images.shape[3]), dtype=np.uint8)
-    for t, image in enumerate(images):
-        x = torch.from_numpy(image).permute(2, 0, 1)[None].float()
-        x = F.interpolate(x, size=(size[1], size[0]), mode="area")
-        out[t] = x[0].permute(1, 2, 0).round().clamp(0, 255).byte().numpy()
-    return out
+    squeeze = images.shape[3] == 1
+    out = [
+        np.asarray(Image.fromarray(image[..., 0] if squeeze else image).resize(size, Image.BOX))
+        for image in images
+    ]
+    return np.stack(out)[..., None] if squeeze else np.stack(out)
 
 
 def resample_times(
@@ -190,9 +198,12 @@ def read_image(path: Path) -> np.ndarray:
     return image if image.ndim == 3 else image[..., None]
 
 
-def read_frame_folder(folder: str | os.PathLike, count: int | None = None) -> np.ndarray:
-    """A folder of frame images (sorted naturally) → [T, H, W, 3|4] uint8; the first ``count``
-    of them when given."""
+def read_frame_folder(
+    folder: str | os.PathLike, count: int | None = None, max_side: int | None = None
+) -> tuple[np.ndarray, tuple[int, int]]:
+    """A folder of frame images (sorted naturally) → ([T, H, W, 3|4] uint8, (width, height) as
+    recorded); the first ``count`` of them when given, each at most ``max_side`` px a side
+    (:func:`fit_within`) when given."""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError("frame folder not found", source=str(folder))
@@ -200,12 +211,15 @@ def read_frame_folder(folder: str | os.PathLike, count: int | None = None) -> np
     if not files:
         kinds = "/".join(IMAGE_SUFFIXES)
         raise InputError(f"no frames ({kinds}) in the folder", source=str(folder))
-    files = files[:count]
-    frames = _same_channels([_as_rgb_or_rgba(read_image(p), str(p)) for p in files])
-    shapes = {f.shape for f in frames}
-    if len(shapes) != 1:
-        raise InputError(f"frames of different sizes {sorted(shapes)}", source=str(folder))
-    return np.stack(frames)
+    frames, sizes = [], set()
+    for path in files[:count]:
+        frame = _as_rgb_or_rgba(read_image(path), str(path))
+        sizes.add((frame.shape[1], frame.shape[0]))
+        frames.append(frame if max_side is None else fit_within(frame[None], max_side)[0])
+    if len(sizes) != 1:
+        shapes = sorted((h, w) for w, h in sizes)
+        raise InputError(f"frames of different sizes {shapes}", source=str(folder))
+    return np.stack(_same_channels(frames)), sizes.pop()
 
 
 def resample_between(
