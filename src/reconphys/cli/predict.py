@@ -60,7 +60,11 @@ def predict_command(
         help="Seconds into the recording where the object is released (frame 0), or 'auto': "
         "read from the masks (the object held still, then falling from rest).",
     ),
-    end: float = typer.Option(None, help="Seconds into the recording to stop reading at."),
+    end: float = typer.Option(
+        None,
+        help="Seconds into the recording to stop reading at (default: 0.87 s after the start, "
+        "30 frames, as long as the training clips; the rest is not decoded).",
+    ),
     sample: str = typer.Option(None, help="Dataset input: the sample id."),
     view: int = typer.Option(None, help="Dataset input: the view (default: the model's)."),
     model: Path = typer.Option(None, help="Physics predictor (default: the shipped model)."),
