@@ -110,6 +110,7 @@ class CameraEstimate:
             "ground_from": "where the object rests"
             if self.contact_s is None
             else f"the first touch of the ground, {self.contact_s:.3f} s",
+            "contact_s": None if self.contact_s is None else round(self.contact_s, 4),
         }
 
 
