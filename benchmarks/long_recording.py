@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import platform
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -68,7 +69,7 @@ def main() -> None:
             clip = Path(folder) / f"phone_{held_s:.0f}.mp4"
             phone_clip(args.data, args.index, args.seconds + held_s, held_s, clip)
             seconds, peak, status = run([str(clip), *extra, "--out", str(Path(folder) / "o")])
-            subprocess.run(["rm", "-rf", str(Path(folder) / "o")], check=True)
+            shutil.rmtree(Path(folder) / "o", ignore_errors=True)
             print(
                 f"{WIDTH}×{HEIGHT}, {FPS:.0f} fps, {args.seconds + held_s:.0f} s"
                 f"{', held 2 s, --start auto' if held_s else ''}: exit {status}, {seconds:.1f} s, "

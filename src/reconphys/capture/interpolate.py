@@ -45,8 +45,9 @@ def _centroid(mask: np.ndarray) -> np.ndarray:  # [2] (row, column) pixels
 def _between(
     m0: np.ndarray, m1: np.ndarray, c0: np.ndarray, c1: np.ndarray, w: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The mask [H, W] bool and object colours [H, W, 3] a fraction ``w`` of the way from the
-    earlier frame (m0, c0) to the later (m1, c1) (module doc)."""
+    """The mask [H, W] bool and object colours [H, W, 3] (float64, black outside the mask) a
+    fraction ``w`` of the way from the earlier frame (m0, c0) to the later (m1, c1) (module
+    doc); only the box around both masks and the motion is computed."""
     d = _centroid(m1) - _centroid(m0)
     margin = MARGIN_PX + math.ceil(float(np.abs(d).max()))
     rows, cols = np.nonzero(m0 | m1)
@@ -54,16 +55,20 @@ def _between(
     bottom = min(rows.max() + margin + 1, m0.shape[0])
     right = min(cols.max() + margin + 1, m0.shape[1])
     box = (slice(top, bottom), slice(left, right))
+    c0, c1 = c0[box].astype(np.float64), c1[box].astype(np.float64)
     a0 = _shift(m0[box].astype(np.float64), w * d, 0.0)  # the masks' coverage, moved
     a1 = _shift(m1[box].astype(np.float64), -(1 - w) * d, 0.0)
-    p0 = _shift(c0[box] * m0[box][..., None], w * d, 0.0)  # premultiplied colours, moved
-    p1 = _shift(c1[box] * m1[box][..., None], -(1 - w) * d, 0.0)
+    p0 = _shift(c0 * m0[box][..., None], w * d, 0.0)  # premultiplied colours, moved
+    p1 = _shift(c1 * m1[box][..., None], -(1 - w) * d, 0.0)
     coverage = (1 - w) * a0 + w * a1
+    inside = coverage >= 0.5
     mask = np.zeros_like(m0)
-    mask[box] = coverage >= 0.5
-    colour = np.zeros_like(c0)
-    colour[box] = ((1 - w) * p0 + w * p1) / np.maximum(coverage, 1e-6)[..., None]
-    return mask, colour * mask[..., None]
+    mask[box] = inside
+    colour = np.zeros((*m0.shape, 3))
+    colour[box] = (
+        ((1 - w) * p0 + w * p1) / np.maximum(coverage, 1e-6)[..., None] * inside[..., None]
+    )
+    return mask, colour
 
 
 def frames_between(
@@ -87,8 +92,7 @@ def frames_between(
         mask = None
         if w > 0 and bool(binary[b].any()) and bool(binary[a].any()):
             m0, m1 = binary[b].numpy(), binary[a].numpy()
-            c0, c1 = recorded[b].double().numpy(), recorded[a].double().numpy()
-            mask, colour = _between(m0, m1, c0, c1, w)
+            mask, colour = _between(m0, m1, recorded[b].numpy(), recorded[a].numpy(), w)
         if mask is None or not mask.any():  # on a recorded frame, or nothing to move
             near = b if w < 0.5 else a
             out_rgb[j], out_masks[j] = recorded[near], binary[near]

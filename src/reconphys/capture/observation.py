@@ -230,18 +230,17 @@ def load_observation(
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
             black = False
             fit_px = SEGMENTER_FALL_FIT_PX
-    objects = rgb * chosen[..., None]
-    if between.any():
-        position = {int(i): n for n, i in enumerate(picks)}
+    time_resampling = "the recorded frames"
+    if between.any():  # picks is sorted: each wanted frame's pair by its place in it
         rgb, chosen, objects = frames_between(
-            rgb, chosen, *(np.array([position[i] for i in x]) for x in (before, after)), weight
+            rgb, chosen, np.searchsorted(picks, before), np.searchsorted(picks, after), weight
         )
-    time_resampling = (
-        f"between the two nearest recorded frames ({int(between.sum())} of {len(weight)}: "
-        "motion-compensated)"
-        if between.any()
-        else "the recorded frames"
-    )
+        time_resampling = (
+            f"between the two nearest recorded frames ({int(between.sum())} of {len(weight)}: "
+            "motion-compensated)"
+        )
+    else:
+        objects = rgb * chosen[..., None]
     check_masks(chosen, str(masks) if masks is not None else str(path))
     if auto:  # held still first: read the recording again from the release (or the start)
         release = release_time(chosen, frame_dt)

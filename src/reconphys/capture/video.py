@@ -131,7 +131,7 @@ def working_size(width: int, height: int, max_side: int = WORK_MAX_SIDE) -> tupl
 
 
 def fit_within(images: np.ndarray, max_side: int = WORK_MAX_SIDE) -> np.ndarray:
-    """[T, H, W, C] uint8 → the same, area-averaged (box filter) to :func:`working_size`;
+    """[T, H, W, 3|4] uint8 → the same, area-averaged (box filter) to :func:`working_size`;
     unchanged when it fits."""
     from PIL import Image
 
@@ -139,12 +139,7 @@ def fit_within(images: np.ndarray, max_side: int = WORK_MAX_SIDE) -> np.ndarray:
     size = working_size(width, height, max_side)
     if size == (width, height):
         return images
-    squeeze = images.shape[3] == 1
-    out = [
-        np.asarray(Image.fromarray(image[..., 0] if squeeze else image).resize(size, Image.BOX))
-        for image in images
-    ]
-    return np.stack(out)[..., None] if squeeze else np.stack(out)
+    return np.stack([np.asarray(Image.fromarray(x).resize(size, Image.BOX)) for x in images])
 
 
 def resample_times(
