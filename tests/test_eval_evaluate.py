@@ -40,6 +40,15 @@ def eval_set(dataset):
     return EvalSet(dataset, "test")
 
 
+def test_shards_split_the_samples_without_overlap(dataset, eval_set):
+    """evaluate --shard I/N: every N-th sample from the I-th; together, each sample once."""
+    assert len(eval_set) >= 2
+    shards = [EvalSet(dataset, "test", shard=(i, 2)).ids for i in range(2)]
+    assert sorted(shards[0] + shards[1]) == sorted(eval_set.ids)
+    assert shards[1] == eval_set.ids[1::2]
+    assert EvalSet(dataset, "test", limit=2, shard=(1, 2)).ids == eval_set.ids[1:2]
+
+
 def test_samples_carry_frames_cameras_and_true_geometry(eval_set):
     assert len(eval_set) == 2
     sample = eval_set.load(0)
@@ -230,6 +239,8 @@ def test_evaluate_command_writes_the_report(dataset, tmp_path):
         (["--data", "{data}", "--methods", "trivial,magic"], "unknown method 'magic'"),
         (["--data", "{data}", "--split", "dev"], "expected one of test, train, all"),
         (["--data", "{data}", "--budget-seconds", "0"], "--budget-seconds"),
+        (["--data", "{data}", "--shard", "2/2"], "expected I/N with 0 ≤ I < N"),
+        (["--data", "{data}", "--shard", "7/9"], "shard 7/9 holds no sample"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(dataset, tmp_path, args, message):

@@ -316,13 +316,64 @@ def test_gsplat_backend_needs_cuda():
         render(gaussians, dataset_views(16, 16), backend="opengl")
 
 
+@pytest.mark.parametrize("sigma_px", [0.15, 0.4])
+def test_antialiased_subpixel_gaussian_keeps_its_integral(sigma_px):
+    """A Gaussian below a pixel: the image's total alpha is ∫ o·exp(−r²/2σ²) = 2π σ² o in
+    antialiased mode (opacity × √(det Σ / det(Σ + εI)) = σ² / (σ² + ε)), while classic mode dilates
+    it to 2π (σ² + ε) o. Both less the tail the 1/255 cut drops: a fraction 1 / (255 o′) of a 2D
+    Gaussian of peak o′ lies where it is below 1/255."""
+    depth, opacity, eps = 2.0, 0.6, 0.3
+    scale = sigma_px * depth / FOCAL
+    args = (
+        torch.tensor([[0.004, -0.003, depth]], dtype=F64),
+        identity_quats(1),
+        torch.full((1, 3), scale, dtype=F64),
+        torch.tensor([opacity], dtype=F64),
+        torch.ones(1, 3, dtype=F64),
+    )
+    _, alpha_aa, _ = render_one(*args, antialiased=True)
+    _, alpha_classic, _ = render_one(*args)
+    peak = opacity * sigma_px**2 / (sigma_px**2 + eps)
+    exact = 2.0 * math.pi * sigma_px**2 * opacity * (1.0 - 1.0 / (255.0 * peak))
+    dilated = 2.0 * math.pi * (sigma_px**2 + eps) * opacity * (1.0 - 1.0 / (255.0 * opacity))
+    assert float(alpha_aa.sum()) == pytest.approx(exact, rel=0.01)
+    assert float(alpha_classic.sum()) == pytest.approx(dilated, rel=0.01)
+
+
+def test_antialiased_is_classic_for_large_gaussians():
+    """σ ≫ √ε: the compensation is ~1 (σ²/(σ² + 0.3) ≥ 0.997 at σ = 10 px)."""
+    n = 30
+    g = torch.Generator().manual_seed(3)
+    means = torch.cat(
+        [
+            (torch.rand(n, 2, generator=g, dtype=F64) - 0.5) * 0.6,
+            torch.full((n, 1), 2.0, dtype=F64),
+        ],
+        1,
+    )
+    scales = torch.full((n, 3), 10.0 * 2.0 / FOCAL, dtype=F64)
+    args = (
+        means,
+        identity_quats(n),
+        scales,
+        torch.full((n,), 0.5, dtype=F64),
+        torch.rand(n, 3, generator=g, dtype=F64),
+    )
+    rgb_aa, alpha_aa, _ = render_one(*args, antialiased=True)
+    rgb, alpha, _ = render_one(*args)
+    assert (alpha_aa - alpha).abs().mean() < 1e-3  # (a tail crossing the 1/255 cut: ≤ 0.01)
+    assert (alpha_aa - alpha).abs().max() < 0.01
+    assert (rgb_aa - rgb).abs().max() < 0.01
+
+
 @pytest.mark.cuda
 @pytest.mark.skipif("gsplat" not in available_backends(), reason="needs gsplat and a CUDA GPU")
-def test_gsplat_matches_torch_on_cuda():
+@pytest.mark.parametrize("antialiased", [False, True])
+def test_gsplat_matches_torch_on_cuda(antialiased):
     scene = [t.float().cuda() for t in random_scene(2000, seed=7)]
     cams = dataset_views(64, 64, device="cuda")
     gaussians = Gaussians.from_activated(scene[0], scene[2], scene[3], scene[4], scene[1])
-    reference = render(gaussians, cams, backend="torch")
-    fast = render(gaussians, cams, backend="gsplat")
+    reference = render(gaussians, cams, backend="torch", antialiased=antialiased)
+    fast = render(gaussians, cams, backend="gsplat", antialiased=antialiased)
     assert (reference.rgb - fast.rgb).abs().mean() < 1e-3
     assert (reference.alpha - fast.alpha).abs().mean() < 1e-3

@@ -14,7 +14,16 @@ app = typer.Typer()
 # How the report states the command: these options always, in this order ...
 REPORT_ALWAYS = ("data", "split", "methods", "budget_seconds")
 # ... these when they differ from their declared defaults, then --out.
-REPORT_IF_CHANGED = ("limit", "device", "seed", "chamfer_points", "emd_points", "threads", "model")
+REPORT_IF_CHANGED = (
+    "limit",
+    "shard",
+    "device",
+    "seed",
+    "chamfer_points",
+    "emd_points",
+    "threads",
+    "model",
+)
 
 
 @app.command("evaluate")
@@ -28,6 +37,11 @@ def evaluate(
         "trivial,oracle,springgaus,appearance", help="Comma-separated methods to compare."
     ),
     limit: int = typer.Option(None, help="Evaluate only the first N samples of the split."),
+    shard: str = typer.Option(
+        None,
+        help="I/N: only every N-th of those samples from the I-th, to run N evaluations in "
+        "parallel (benchmarks/sharded_evaluate.py joins their per_sample.csv).",
+    ),
     budget_seconds: float = typer.Option(
         60.0, help="Seconds per scene for the per-scene fits (springgaus, appearance)."
     ),
@@ -48,6 +62,7 @@ def evaluate(
 
     Writes OUT/metrics.json, OUT/report.md, OUT/summary.csv, OUT/per_sample.csv,
     OUT/per_frame.csv and figures (PSNR per frame, attribute scatter, contact sheet)."""
+    from ..data.plan import parse_shard
     from ..devices import resolve_device
     from ..eval.evaluate import EvalSettings, run_evaluation
     from ..eval.methods import parse_methods
@@ -71,7 +86,7 @@ def evaluate(
         raise InputError("only the reconphys methods use a model; add one to --methods", "--model")
     torch_device = resolve_device(device)
     check_output(out, overwrite)
-    eval_set = EvalSet(data, split, limit)
+    eval_set = EvalSet(data, split, limit, parse_shard(shard))
     if threads:
         from ..threads import set_cpu_threads
 

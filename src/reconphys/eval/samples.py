@@ -71,9 +71,16 @@ class EvalSet:
         root: the dataset folder written by ``make-data`` (must be complete).
         split: "test", "train" or "all".
         limit: evaluate only the first ``limit`` samples of the split (manifest order).
+        shard: (I, N): of those, only the I-th, (I + N)-th, ... (N evaluations in parallel).
     """
 
-    def __init__(self, root: str | os.PathLike, split: str = "test", limit: int | None = None):
+    def __init__(
+        self,
+        root: str | os.PathLike,
+        split: str = "test",
+        limit: int | None = None,
+        shard: tuple[int, int] | None = None,
+    ):
         if split not in SPLITS:
             raise InputError(f"expected one of {', '.join(SPLITS)}, got {split!r}", field="--split")
         if limit is not None and limit < 1:
@@ -97,6 +104,14 @@ class EvalSet:
                 source=str(self.root / "manifest.json"),
             )
         self.indices = list(range(len(self.dataset)))[:limit]
+        if shard is not None:
+            self.indices = self.indices[shard[0] :: shard[1]]
+            if not self.indices:
+                raise InputError(
+                    f"shard {shard[0]}/{shard[1]} holds no sample "
+                    f"({len(self.dataset)} in the split)",
+                    field="--shard",
+                )
 
     def __len__(self) -> int:
         return len(self.indices)

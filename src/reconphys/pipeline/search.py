@@ -38,6 +38,7 @@ import time
 from dataclasses import replace
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 from ..assets.asset import Asset
@@ -60,6 +61,16 @@ MOTION_BOUNDS = torch.tensor([[-3.0, 3.0]] * 3 + [[-8.0, 8.0]] * 3, dtype=torch.
 V_SPAN_SCALE, W_SPAN_SCALE = 0.2, 0.75  # m/s and rad/s per unit of span
 SPAN_SCALES = (1.0, 1.0, FRICTION_SPAN_SCALE) + (V_SPAN_SCALE,) * 3 + (W_SPAN_SCALE,) * 3
 CANDIDATES = 7  # values per observable and round (one batched rollout)
+# The comparison is smaller than the recording (its frames area-averaged down to ``resolution``).
+# Rendering a fine asset (a dense PLY, the paper's 20,000 Gaussians) straight at that size is not
+# what the average of its full-size render looks like: each Gaussian below a pixel is dilated to
+# a pixel-sized blob at full opacity, the back of the object shows through, and every candidate's
+# error is dominated by that, not by the motion (the profiles go flat). So where the Gaussians'
+# median σ is below FINE_SIGMA_PX pixels of the comparison, it is rendered s× larger (s = 2–4, up
+# to the recording's own size, at most MAX_SUPERSAMPLE×, in gsplat's antialiased mode) and
+# area-averaged back down (docs/rendering.md "Rendering smaller than the Gaussians were made for").
+FINE_SIGMA_PX = 0.75
+MAX_SUPERSAMPLE = 4
 MIN_SUBSTEPS = 25  # as the cpu_small training recipe and pipeline/refine.py
 # A candidate replaces the current value only if its error is lower by this fraction: where the
 # video does not show an observable (all errors alike), the start is kept, not a grid end.
@@ -187,6 +198,45 @@ def substep_groups(need: list[int], ratio: float = SUBSTEP_GROUP_RATIO) -> list[
 
 
 @torch.no_grad()
+def supersampling(
+    gaussians: Gaussians,  # the object at frame 0
+    camera: CameraSpec,  # the comparison's camera
+    recorded_scale: float,  # the recording's pixels per comparison pixel (≥ 1)
+) -> int:
+    """How many times larger than the comparison to render (:data:`FINE_SIGMA_PX`): enough for the
+    median Gaussian's σ to reach FINE_SIGMA_PX pixels, never beyond the recording's own size nor
+    MAX_SUPERSAMPLE; 1 for every asset whose Gaussians are not below that size."""
+    rotation, translation = camera.world_to_cam[:3, :3], camera.world_to_cam[:3, 3]
+    depth = (gaussians.means.double() @ rotation.double().T + translation.double())[:, 2]
+    sigma = gaussians.scales.double().prod(-1) ** (1.0 / 3.0)  # geometric mean, metres
+    in_front = depth > 1e-3
+    if not bool(in_front.any()):
+        return 1
+    pixels = float((sigma[in_front] * float(camera.K[0, 0]) / depth[in_front]).median())
+    if pixels >= FINE_SIGMA_PX:
+        return 1
+    need = math.ceil(FINE_SIGMA_PX / max(pixels, 1e-6))
+    return max(1, min(need, MAX_SUPERSAMPLE, math.ceil(recorded_scale - 1e-6)))
+
+
+def render_compared(
+    gaussians: Gaussians,  # tensors [B, N, ·]
+    camera: CameraSpec,  # the comparison's camera (h × w)
+    supersample: int = 1,
+) -> tuple[Tensor, Tensor]:  # rgb [B, h, w, 3], alpha [B, h, w]
+    """Render into the comparison's camera; with ``supersample`` s > 1, at s·h × s·w in gsplat's
+    antialiased mode, then each s × s block averaged (the full-size frame's area average)."""
+    if supersample == 1:
+        out = render(gaussians, camera.cameras())
+        return out.rgb[:, 0], out.alpha[:, 0]
+    s = supersample
+    fine = camera.resized(camera.width * s, camera.height * s)
+    out = render(gaussians, fine.cameras(), antialiased=True)
+    rgb = F.avg_pool2d(out.rgb[:, 0].permute(0, 3, 1, 2), s).permute(0, 2, 3, 1)
+    return rgb, F.avg_pool2d(out.alpha[:, 0, None], s)[:, 0]
+
+
+@torch.no_grad()
 def photometric_errors(
     asset: Asset,
     frames: Tensor,  # [T, H, W, 3] in [0, 1], frame 0 = the initial state
@@ -195,6 +245,7 @@ def photometric_errors(
     min_substeps: int = MIN_SUBSTEPS,
     silhouettes: Tensor | None = None,  # [T, H, W] the object's masks at the frames' size
     silhouette_weight: float = 0.0,  # × the mean squared error of rendered alpha − mask
+    supersample: int = 1,  # rendered this many times larger, then area-averaged (supersampling)
 ) -> Tensor:  # [B] mean squared error over frames 1..T−1
     """Simulate the asset with each candidate's observables and score its video. With 9 columns
     the last six are the initial linear (m/s) and angular (rad/s, about the anchors' centroid)
@@ -223,11 +274,11 @@ def photometric_errors(
     g = asset.gaussians
     means = deform_means(g.means, asset.x0[None], x, asset.binding_index, asset.binding_weight)
     batch = g.map(lambda t: t.expand(len(x), *t.shape)).with_means(means)
-    out = render(batch, camera.cameras())
-    images = out.rgb[:, 0].reshape(count, steps, *frames.shape[1:])
+    rgb, alpha = render_compared(batch, camera, supersample)
+    images = rgb.reshape(count, steps, *frames.shape[1:])
     error = ((images - frames[1:][None]) ** 2).mean((1, 2, 3, 4))
     if silhouettes is not None and silhouette_weight > 0:
-        alpha = out.alpha[:, 0].reshape(count, steps, *frames.shape[1:3])
+        alpha = alpha.reshape(count, steps, *frames.shape[1:3])
         error = error + silhouette_weight * ((alpha - silhouettes[1:][None]) ** 2).mean((1, 2, 3))
     return error
 
@@ -239,13 +290,14 @@ def lighting_gain(
     gaussians: Gaussians,  # the object at frame 0
     frame: Tensor,  # [H, W, 3] the recording's frame 0, background black
     camera: CameraSpec,
+    supersample: int = 1,
 ) -> Tensor:  # [3] per-channel factor, in [0.25, 4]
     """How much brighter (per channel) the recording shows the object than its Gaussians' colours
     render: least squares over the pixels both cover. A scene's light and exposure scale the
     colours (our plain renders: 1); without it the whole colour difference would count as misfit,
     raising the error floor and flattening every profile (the realistic look's shading did)."""
-    out = render(gaussians.map(lambda t: t[None]), camera.cameras())
-    rendered, alpha = out.rgb[0, 0], out.alpha[0, 0]
+    rgb, alpha = render_compared(gaussians.map(lambda t: t[None]), camera, supersample)
+    rendered, alpha = rgb[0], alpha[0]
     both = (alpha > 0.5) & (frame.amax(-1) > 0)
     if int(both.sum()) < MIN_GAIN_PIXELS:
         return torch.ones(3)
@@ -350,6 +402,7 @@ def search(
         raise ValueError(f"candidates: expected an odd number ≥ 3, got {candidates}")
     started = time.perf_counter()
     window = None if masks is None else object_window(masks)
+    recorded_width = frames.shape[2]
     silhouettes = None
     if masks is not None and silhouette_weight > 0:
         both = torch.cat([frames, masks[..., None].to(frames)], -1)
@@ -357,7 +410,9 @@ def search(
         frames, silhouettes = both[..., :3], both[..., 3]
     else:
         frames, camera = comparison_view(frames, camera, resolution, window)
-    gain = lighting_gain(asset.gaussians, frames[0], camera)
+    recorded_scale = (window[2] if window else recorded_width) / frames.shape[2]
+    supersample = supersampling(asset.gaussians, camera, recorded_scale)
+    gain = lighting_gain(asset.gaussians, frames[0], camera, supersample)
     compared = replace(asset, gaussians=scaled_colours(asset.gaussians, gain))
     size = list(frames.shape[1:3])
     if temperature is None:
@@ -395,7 +450,7 @@ def search(
         trial[:, i] = (current[i] + offsets).clamp(*bounds[i].tolist())
         errors = photometric_errors(
             compared, frames, camera, to_world(trial), silhouettes=silhouettes,
-            silhouette_weight=silhouette_weight,
+            silhouette_weight=silhouette_weight, supersample=supersample,
         )  # fmt: skip
         pick = int(errors.argmin())
         if not errors[pick] < errors[centre_at] * (1.0 - TIE):
@@ -476,6 +531,7 @@ def search(
         "network_sigma": None if prior_sigma is None else [float(x) for x in prior_sigma],
         "rounds": rounds,
         "render_size": size,
+        "supersample": supersample,  # rendered this many times larger, then averaged
         "window": window,  # (left, top, width, height) of the recording compared; None: all
         "seconds": round(time.perf_counter() - started, 2),
     }

@@ -68,6 +68,7 @@ def render(
     backend: str = "auto",
     near_plane: float = 0.01,
     eps2d: float = 0.3,
+    antialiased: bool = False,
 ) -> RenderOutput:
     """Render a (batch of) Gaussian set(s) into C cameras.
 
@@ -76,6 +77,10 @@ def render(
     renderer otherwise. Cameras without batch dims are shared by every
     element of a batch of Gaussians. ``near_plane`` is in metres, ``eps2d`` in pixels². gsplat
     computes in float32 whatever the input dtype; use backend="torch" for float64 (e.g. gradcheck).
+    ``antialiased``: gsplat's antialiased mode (each opacity × √(det Σ₂ / det(Σ₂ + eps2d·I))), for
+    images smaller than the ones the Gaussians were made for: a Gaussian below a pixel then adds
+    its area's share of the pixel, as area-averaging the full-size image would, instead of a
+    pixel-sized blob at full opacity (docs/rendering.md).
     """
     if backend not in RENDER_BACKENDS:
         raise ValueError(f"backend: expected one of {RENDER_BACKENDS}, got {backend!r}")
@@ -101,5 +106,6 @@ def render(
         cameras.height,
         near_plane=near_plane,
         eps2d=eps2d,
+        antialiased=antialiased,
     )
     return RenderOutput(rgb=rgb, alpha=alpha, depth=depth)

@@ -22,10 +22,12 @@ def rasterize_gsplat(
     height: int,
     near_plane: float = 0.01,
     eps2d: float = 0.3,
+    antialiased: bool = False,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Render with gsplat on CUDA: rgb ``[..., C, H, W, D]``, alpha and depth ``[..., C, H, W]``.
 
-    Calls ``gsplat.rasterization`` with ``packed=False``, ``rasterize_mode="classic"``, colours
+    Calls ``gsplat.rasterization`` with ``packed=False``, ``rasterize_mode="classic"`` (or
+    ``"antialiased"`` with ``antialiased``), colours
     given directly (``sh_degree=None``) and ``render_mode="RGB+ED"`` (the last channel is the
     expected camera z, metres). Background black; leading batch dims are passed through (gsplat
     ≥ 1.5 flattens them itself).
@@ -69,7 +71,7 @@ def rasterize_gsplat(
         sh_degree=None,
         packed=False,
         render_mode="RGB+ED",
-        rasterize_mode="classic",
+        rasterize_mode="antialiased" if antialiased else "classic",
     )
     rgb = render_colors[..., :-1].to(dtype)
     depth = render_colors[..., -1].to(dtype)

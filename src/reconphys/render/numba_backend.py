@@ -267,6 +267,7 @@ def rasterize_numba(
     height: int,
     near_plane: float = 0.01,
     eps2d: float = 0.3,
+    antialiased: bool = False,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """:func:`torch_backend.rasterize_torch` with the compositing compiled: same inputs, outputs
     (rgb ``[..., C, H, W, D]``, alpha and depth ``[..., C, H, W]``) and gradients; CPU tensors,
@@ -279,8 +280,9 @@ def rasterize_numba(
         raise ValueError(f"the numba renderer runs on CPU tensors, got device {means.device}")
     _check_shapes(means, quats, scales, opacities, colors, world_to_cam, K)
     images = project_images(
-        means, quats, scales, opacities, colors, world_to_cam, K, width, height, near_plane, eps2d
-    )
+        means, quats, scales, opacities, colors, world_to_cam, K, width, height, near_plane, eps2d,
+        antialiased,
+    )  # fmt: skip
     with torch.no_grad():
         visible = (images.radii > 0).all(dim=-1)
         keys = torch.where(visible, images.depths, torch.full_like(images.depths, float("inf")))

@@ -7,6 +7,11 @@ render_mode="RGB+ED")`` of gsplat 1.5.3 on any device and dtype, with autograd f
 - projection: camera-space covariance ``R Σ Rᵀ`` pushed to pixels with the EWA Jacobian of the
   pinhole model (the Jacobian's x/y is clamped to 1.3× the half field of view, as in gsplat, which
   only matters for Gaussians centred off-screen); ``eps2d`` is added to the 2D covariance diagonal;
+- ``antialiased=True`` reproduces ``rasterize_mode="antialiased"`` instead (Mip-Splatting's 2D
+  filter): each opacity is also multiplied by ``√(det Σ₂ / det(Σ₂ + eps2d·I))``, so a Gaussian much
+  smaller than a pixel keeps its integrated coverage instead of being dilated to a pixel's blob at
+  full opacity — what an image rendered at a lower resolution than its Gaussians were made for
+  needs to look like the full-size image area-averaged down;
 - culling: camera depth ``z < near_plane`` or ``z > 1e10``, opacity ``< 1/255``, or a screen box
   (``ceil(min(3.33, √(2 ln(255·opacity))) · σ_x|y)`` pixels) that misses the image;
 - per pixel (centre at ``(x + 0.5, y + 0.5)``), front to back by camera depth:
@@ -56,6 +61,7 @@ class ProjectedGaussians:
     means2d: Tensor  # [..., C, N, 2] centres, pixels
     conics: Tensor  # [..., C, N, 3] (a, b, c) of the inverse 2D covariance [[a, b], [b, c]], 1/px²
     depths: Tensor  # [..., C, N] camera-space z, metres
+    opacities: Tensor  # [..., C, N] opacity per camera (× the antialiasing compensation if any)
     radii: Tensor  # [..., C, N, 2] half-sizes of the screen bounding box, pixels (0 = culled)
 
 
@@ -70,8 +76,10 @@ def project_gaussians(
     height: int,
     near_plane: float = 0.01,
     eps2d: float = 0.3,
+    antialiased: bool = False,
 ) -> ProjectedGaussians:
-    """EWA projection of 3D Gaussians to 2D image-plane Gaussians, with gsplat's culling."""
+    """EWA projection of 3D Gaussians to 2D image-plane Gaussians, with gsplat's culling
+    (``antialiased``: opacities × the 2D filter's compensation, as gsplat's antialiased mode)."""
     rotation = world_to_cam[..., :3, :3].unsqueeze(-3)  # [..., C, 1, 3, 3]
     translation = world_to_cam[..., :3, 3].unsqueeze(-2)  # [..., C, 1, 3]
     means_cam = (rotation @ means.unsqueeze(-1).unsqueeze(-4)).squeeze(-1) + translation
@@ -107,13 +115,23 @@ def project_gaussians(
     det = c00 * c11 - c01 * c01
     det_safe = torch.where(det > 0, det, torch.ones_like(det))
     conics = torch.stack([c11 / det_safe, -c01 / det_safe, c00 / det_safe], dim=-1)
+    opacity = opacities.unsqueeze(-2).expand_as(z)  # [..., C, N]
+    if antialiased:  # the filter's area ratio: √(det Σ₂ / det(Σ₂ + eps2d·I)), 0 if degenerate
+        det_unfiltered = (c00 - eps2d) * (c11 - eps2d) - c01 * c01
+        ratio = (det_unfiltered / det_safe).clamp_min(0.0)
+        opacity = (
+            opacity
+            * torch.sqrt(torch.where(ratio > 0, ratio, torch.ones_like(ratio)))
+            * (ratio > 0)
+        )
 
     means2d = torch.stack([fx * x / z_safe + cx, fy * y / z_safe + cy], dim=-1)
 
     with torch.no_grad():
-        opacity = opacities.unsqueeze(-2).expand_as(z)
         # Largest Mahalanobis radius at which alpha can still reach 1/255 (capped like gsplat).
-        extent = torch.sqrt(2.0 * torch.log(opacity.clamp_min(ALPHA_THRESHOLD) / ALPHA_THRESHOLD))
+        extent = torch.sqrt(
+            2.0 * torch.log(opacity.detach().clamp_min(ALPHA_THRESHOLD) / ALPHA_THRESHOLD)
+        )
         extent = extent.clamp_max(MAX_BOX_SIGMAS)
         radius_x = torch.ceil(extent * torch.sqrt(c00.clamp_min(0)))
         radius_y = torch.ceil(extent * torch.sqrt(c11.clamp_min(0)))
@@ -124,10 +142,12 @@ def project_gaussians(
             & (v + radius_y > 0)
             & (v - radius_y < height)
         )
-        visible = in_front & (det > 0) & (opacity >= ALPHA_THRESHOLD) & on_screen
+        visible = in_front & (det > 0) & (opacity.detach() >= ALPHA_THRESHOLD) & on_screen
         radii = torch.stack([radius_x, radius_y], dim=-1) * visible.unsqueeze(-1)
 
-    return ProjectedGaussians(means2d=means2d, conics=conics, depths=z, radii=radii)
+    return ProjectedGaussians(
+        means2d=means2d, conics=conics, depths=z, opacities=opacity, radii=radii
+    )
 
 
 def _composite_block(
@@ -287,6 +307,7 @@ def rasterize_torch(
     eps2d: float = 0.3,
     chunk_pixels: int | None = None,
     chunk_gaussians: int = 4096,
+    antialiased: bool = False,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Render Gaussians into C cameras: premultiplied colour, alpha and expected depth.
 
@@ -294,7 +315,8 @@ def rasterize_torch(
     differentiable w.r.t. means, quats, scales, opacities and colors (not w.r.t. the cameras'
     culling decisions, which are piecewise constant). The leading dims ``...`` of the Gaussians and
     of the cameras must be equal. ``near_plane`` is in metres, ``eps2d`` in pixels² (added to the
-    projected covariance diagonal). Pixels are processed in square tiles of about
+    projected covariance diagonal; ``antialiased``: gsplat's antialiased mode, module docstring).
+    Pixels are processed in square tiles of about
     ``chunk_pixels`` pixels (default: 256 on CPU, where finer culling pays, and 4096 on GPUs, where
     fewer kernel launches pay) and each tile's Gaussians in blocks of ``chunk_gaussians``; their
     product bounds the size of the dense per-(pixel, Gaussian) tensors.
@@ -307,8 +329,9 @@ def rasterize_torch(
     if chunk_pixels is None:
         chunk_pixels = DEFAULT_CHUNK_PIXELS_GPU if means.is_cuda else DEFAULT_CHUNK_PIXELS_CPU
     images = project_images(
-        means, quats, scales, opacities, colors, world_to_cam, K, width, height, near_plane, eps2d
-    )
+        means, quats, scales, opacities, colors, world_to_cam, K, width, height, near_plane, eps2d,
+        antialiased,
+    )  # fmt: skip
     composited = [
         _rasterize_image(
             images.means2d[i],
@@ -371,11 +394,13 @@ def project_images(
     height: int,
     near_plane: float,
     eps2d: float,
+    antialiased: bool = False,
 ) -> ImageInputs:
     """Project every Gaussian into every camera and gather what each image composites."""
     projected = project_gaussians(
-        means, quats, scales, opacities, world_to_cam, K, width, height, near_plane, eps2d
-    )
+        means, quats, scales, opacities, world_to_cam, K, width, height, near_plane, eps2d,
+        antialiased,
+    )  # fmt: skip
     image_shape = (*means.shape[:-2], world_to_cam.shape[-3])
     features = torch.cat(
         [
@@ -388,7 +413,7 @@ def project_images(
     per_image = {
         "means2d": projected.means2d,
         "conics": projected.conics,
-        "opacities": opacities.unsqueeze(-2).expand(*image_shape, opacities.shape[-1]),
+        "opacities": projected.opacities,
         "features": features,
         "depths": projected.depths,
         "radii": projected.radii,
