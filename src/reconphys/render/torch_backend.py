@@ -117,21 +117,15 @@ def project_gaussians(
     conics = torch.stack([c11 / det_safe, -c01 / det_safe, c00 / det_safe], dim=-1)
     opacity = opacities.unsqueeze(-2).expand_as(z)  # [..., C, N]
     if antialiased:  # the filter's area ratio: √(det Σ₂ / det(Σ₂ + eps2d·I)), 0 if degenerate
-        det_unfiltered = (c00 - eps2d) * (c11 - eps2d) - c01 * c01
-        ratio = (det_unfiltered / det_safe).clamp_min(0.0)
-        opacity = (
-            opacity
-            * torch.sqrt(torch.where(ratio > 0, ratio, torch.ones_like(ratio)))
-            * (ratio > 0)
-        )
+        ratio = (cov2d[..., 0, 0] * cov2d[..., 1, 1] - c01 * c01) / det_safe
+        inside = ratio > 0  # (the sqrt's gradient is kept finite where it is 0)
+        opacity = opacity * torch.sqrt(torch.where(inside, ratio, torch.ones_like(ratio))) * inside
 
     means2d = torch.stack([fx * x / z_safe + cx, fy * y / z_safe + cy], dim=-1)
 
     with torch.no_grad():
         # Largest Mahalanobis radius at which alpha can still reach 1/255 (capped like gsplat).
-        extent = torch.sqrt(
-            2.0 * torch.log(opacity.detach().clamp_min(ALPHA_THRESHOLD) / ALPHA_THRESHOLD)
-        )
+        extent = torch.sqrt(2.0 * torch.log(opacity.clamp_min(ALPHA_THRESHOLD) / ALPHA_THRESHOLD))
         extent = extent.clamp_max(MAX_BOX_SIGMAS)
         radius_x = torch.ceil(extent * torch.sqrt(c00.clamp_min(0)))
         radius_y = torch.ceil(extent * torch.sqrt(c11.clamp_min(0)))
@@ -142,7 +136,7 @@ def project_gaussians(
             & (v + radius_y > 0)
             & (v - radius_y < height)
         )
-        visible = in_front & (det > 0) & (opacity.detach() >= ALPHA_THRESHOLD) & on_screen
+        visible = in_front & (det > 0) & (opacity >= ALPHA_THRESHOLD) & on_screen
         radii = torch.stack([radius_x, radius_y], dim=-1) * visible.unsqueeze(-1)
 
     return ProjectedGaussians(
