@@ -10,6 +10,11 @@ curve").
 ``--test DATASET OUT``: only DATASET's test objects (their realistic-look drops: a test set held
 out by object for a model trained on the folder above; docs/training.md "Object-centric input").
 
+``--validation FOLDER OUT``: the validation meshes of the shipped physics ensemble — the objects
+of FOLDER (the folder above) that ``configs/data_pybullet.toml``'s plan puts after the first
+``data.objects`` of ``configs/track_pybullet.toml`` (849): meshes neither the network nor any test
+set has seen, for calibrations at other sizes (docs/training.md "Intervals").
+
 ``--others OUT``: the wheel's other meshes — robot links, toys, props (laikago, kuka, xarm,
 racecar, …; ``.obj``/``.stl`` outside ``random_urdfs``, collision hulls and the named meshes of
 the pybullet source left out) — flattened into OUT: a mesh folder none of the pybullet source's
@@ -17,6 +22,7 @@ objects is in (docs/evaluation.md "another mesh folder").
 
     python benchmarks/held_out_meshes.py data/pyb data/pybullet_meshes
     python benchmarks/held_out_meshes.py --others data/other_meshes
+    python benchmarks/held_out_meshes.py --validation data/pybullet_meshes data/val_meshes
 """
 
 from __future__ import annotations
@@ -26,7 +32,10 @@ import shutil
 from pathlib import Path
 
 from reconphys.assets.mesh import PYBULLET_NAMED_MESHES
-from reconphys.data.sources import PybulletSource
+from reconphys.config_loader import read_table
+from reconphys.data.plan import plan_objects
+from reconphys.data.settings import make_settings
+from reconphys.data.sources import FolderSource, PybulletSource
 from reconphys.data.storage import read_manifest
 
 
@@ -52,6 +61,19 @@ def training_meshes(dataset: Path, out: Path, test: bool = False) -> None:
         print(f"{copied} meshes in {out}; left out {skipped} ({held} and top-level meshes)")
 
 
+def validation_meshes(folder: Path, out: Path) -> None:
+    """The objects of FOLDER that the shipped ensemble's recipe never trained on → OUT."""
+    configs = Path(__file__).resolve().parent.parent / "configs"
+    settings = make_settings(config=configs / "data_pybullet.toml", source=str(folder))
+    trained = int(read_table(configs / "track_pybullet.toml")["data"]["objects"])
+    planned = [p for p in plan_objects(settings, FolderSource(folder)) if p.split == "train"]
+    for p in planned[trained:]:
+        target = out / Path(p.ref.id).parent
+        if not target.exists():
+            shutil.copytree(folder / Path(p.ref.id).parent, target)
+    print(f"{len(planned) - trained} meshes in {out}: {folder}'s objects after the first {trained}")
+
+
 def other_meshes(out: Path) -> None:
     root = PybulletSource().root
     out.mkdir(parents=True, exist_ok=True)
@@ -75,12 +97,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--others", action="store_true", help="the wheel's other meshes → OUT")
     parser.add_argument("--test", action="store_true", help="DATASET's test objects only → OUT")
+    parser.add_argument(
+        "--validation", action="store_true", help="FOLDER's meshes the model never saw → OUT"
+    )
     parser.add_argument("paths", type=Path, nargs="+", help="DATASET OUT, or OUT with --others")
     args = parser.parse_args()
     if args.others:
         if len(args.paths) != 1:
             parser.error("--others takes one folder: OUT")
         other_meshes(args.paths[0])
+    elif args.validation:
+        if len(args.paths) != 2:
+            parser.error("--validation takes FOLDER OUT")
+        validation_meshes(*args.paths)
     else:
         if len(args.paths) != 2:
             parser.error("expected DATASET OUT")

@@ -33,6 +33,7 @@ from reconphys.pipeline.predict import predict_observation
 from reconphys.pipeline.samples import load_sample
 from reconphys.pipeline.search import (
     OBSERVABLES,
+    TEMPERATURE_PIXELS,
     observable_bounds,
     observables,
     profile_interval,
@@ -42,7 +43,8 @@ from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
 # τ·pixels tried
-PRODUCTS = (30, 100, 200, 300, 400, 500, 600, 700, 800, 1000, 1200, 1500, 2000, 3000, 5000)
+PRODUCTS = (30, 100, 200, 300, 400, 500, 600, 700, 800, 1000, 1200, 1500, 2000, 3000, 5000, 8000)
+PRODUCTS_FINE = (500, 750, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 4000, 5000, 8000, 12000)
 FRAMES = 20  # frames 0..19: the predictor's window
 
 
@@ -122,6 +124,7 @@ def main() -> None:
             "intervals": [history["intervals"][n] for n in OBSERVABLES],
             "profiles": [history["profiles"][n] for n in OBSERVABLES],
             "render_size": history["render_size"],
+            "supersample": history["supersample"],
         }
         rows.append(row)
         cells = " ".join(
@@ -164,12 +167,36 @@ def coverage_line(rows: list[dict], intervals: str = "intervals") -> str:
 
 def calibrate(rows: list[dict]) -> None:
     """Intervals for a range of τ·pixels (each sample's τ = that / its compared pixels) from the
-    stored profiles; per observable, the product whose coverage is nearest 80 %."""
+    stored profiles; per observable, the product whose coverage is nearest 80 %. Supersampled
+    comparisons (fine assets) are calibrated apart: their factor over TEMPERATURE_PIXELS is
+    FINE_TEMPERATURE in pipeline/search.py."""
+    fine = [r for r in rows if r.get("supersample", 1) > 1]
+    plain = [r for r in rows if r.get("supersample", 1) == 1]
+    for group, products, what in (
+        (plain, PRODUCTS, "TEMPERATURE_PIXELS"),
+        (fine, PRODUCTS_FINE, "TEMPERATURE_PIXELS × FINE_TEMPERATURE"),
+    ):
+        if group:
+            chosen = calibrate_group(group, products)
+            print(f"calibrated τ·pixels: {chosen} ({what} in pipeline/search.py)")
+            if group is fine:
+                factors = ", ".join(
+                    f"{name} {c / t:.3g}"
+                    for name, c, t in zip(NAMES, chosen, TEMPERATURE_PIXELS, strict=True)
+                )
+                print(f"  = TEMPERATURE_PIXELS × ({factors})")
+
+
+def calibrate_group(rows: list[dict], products: tuple[int, ...]) -> list[int]:
     bounds = observable_bounds()
     pixels = sorted(r["render_size"][0] * r["render_size"][1] for r in rows)
-    print(f"compared pixels: median {pixels[len(pixels) // 2]} ({pixels[0]}–{pixels[-1]})")
+    supersample = sorted({r.get("supersample", 1) for r in rows})
+    print(
+        f"{len(rows)} samples, compared pixels: median {pixels[len(pixels) // 2]} "
+        f"({pixels[0]}–{pixels[-1]}), supersampled {supersample}"
+    )
     best = [None] * 3  # per observable: (|coverage − 0.8|, product)
-    for product in PRODUCTS:
+    for product in products:
         for r in rows:
             temperature = product / (r["render_size"][0] * r["render_size"][1])
             r["trial"] = [
@@ -187,8 +214,7 @@ def calibrate(rows: list[dict]) -> None:
             miss = abs(coverage / len(rows) - 0.8)
             if best[i] is None or miss < best[i][0]:
                 best[i] = (miss, product)
-    chosen = ", ".join(f"{name} {b[1]}" for name, b in zip(NAMES, best, strict=True))
-    print(f"calibrated τ·pixels: {chosen} (TEMPERATURE_PIXELS in pipeline/search.py)")
+    return [b[1] for b in best]
 
 
 if __name__ == "__main__":

@@ -20,7 +20,10 @@ from reconphys.physics import scene_stable_substeps, stable_substeps
 from reconphys.physics.model import ATTRIBUTE_RANGES
 from reconphys.pipeline.samples import load_sample
 from reconphys.pipeline.search import (
+    FINE_TEMPERATURE,
+    MAX_SUPERSAMPLE,
     PREDICTED_GEOMETRY_TEMPERATURE,
+    TEMPERATURE_PIXELS,
     attributes_of,
     lighting_gain,
     network_intervals,
@@ -86,6 +89,10 @@ def test_search_walks_back_to_the_true_observables(sample):
     bounds = observable_bounds()
     for i, (low, high) in enumerate(history["intervals"].values()):
         assert bounds[i, 0] <= low <= high <= bounds[i, 1]
+    pixels = history["render_size"][0] * history["render_size"][1]
+    assert history["temperature"] == pytest.approx(
+        list(temperature_for(pixels, history["supersample"]))
+    )
     assert after_error[0] < 0.25 * before_error[0], (true, start, after)  # log k/m
     assert after_error[2] < 0.5 * before_error[2], (true, start, after)  # friction
     assert after_error.sum() < 0.5 * before_error.sum()
@@ -202,6 +209,16 @@ def test_the_temperature_falls_as_the_compared_pixels_grow():
         for p in (1000, 4000)
     ]
     assert widths[1] == pytest.approx(widths[0] / 2, rel=0.02)
+
+
+def test_a_supersampled_comparison_has_its_own_temperature():
+    """Fine assets (compared supersampled) take TEMPERATURE_PIXELS × FINE_TEMPERATURE, whatever
+    the factor s > 1; coarse ones TEMPERATURE_PIXELS alone."""
+    coarse = temperature_for(1000)
+    assert coarse == pytest.approx([t / 1000 for t in TEMPERATURE_PIXELS])
+    for s in (2, 3, MAX_SUPERSAMPLE):
+        fine = temperature_for(1000, supersample=s)
+        assert fine == pytest.approx([c * f for c, f in zip(coarse, FINE_TEMPERATURE, strict=True)])
 
 
 def test_attributes_of_keeps_the_mass_unless_a_ratio_needs_another():

@@ -446,6 +446,8 @@ def predict_observation(
             resolution=refine_resolution,
             masks=observation.masks[:count],
             temperature_scale=scale,
+            # that factor was chosen on such geometry as it is compared (supersampled or not)
+            fine_temperature=not object_centric,
             # on predicted geometry the fit alone is not to be trusted: times the network's belief
             prior_sigma=sigma if predicted else None,
         )
