@@ -7,7 +7,9 @@ cores slow the simulation many times over.
 
 from __future__ import annotations
 
+import csv
 import json
+import math
 from dataclasses import replace
 
 import pytest
@@ -120,7 +122,7 @@ def test_evaluate_command_reports_reconphys_beside_trivial(dataset, model_path, 
         "--out",
         str(out),
         "--methods",
-        "trivial,reconphys",
+        "trivial,reconphys,reconphys_search",
         "--model",
         str(model_path),
         "--emd-points",
@@ -133,7 +135,26 @@ def test_evaluate_command_reports_reconphys_beside_trivial(dataset, model_path, 
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     metrics = json.loads((out / "metrics.json").read_text())
-    assert list(metrics["methods"]) == ["trivial", "reconphys"]
+    assert list(metrics["methods"]) == ["trivial", "reconphys", "reconphys_search"]
+    # per_sample.csv carries each sample's intervals: the summary's coverage follows from them
+    with open(out / "per_sample.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    searched = [r for r in rows if r["method"] == "reconphys_search"]
+    assert searched and all(r["interval_friction_hi"] == "" for r in rows if r not in searched)
+    for i, key in enumerate(("log_k_over_m", "log_d_over_m", "friction")):
+        inside = []
+        for r in searched:
+            mass = float(r["true_mass"])
+            true = (
+                math.log(float(r["true_stiffness"]) / mass),
+                math.log(float(r["true_damping"]) / mass),
+                float(r["true_friction"]),
+            )[i]
+            lo, hi = float(r[f"interval_{key}_lo"]), float(r[f"interval_{key}_hi"])
+            assert lo <= hi
+            inside.append(lo <= true <= hi)
+        coverage = metrics["methods"]["reconphys_search"]["intervals"][key]["coverage"]
+        assert sum(inside) / len(inside) == pytest.approx(coverage)
     entry = metrics["methods"]["reconphys"]
     assert entry["upper_bound"] and str(model_path) in entry["description"]
     assert entry["reconstruction"]["psnr"] is not None and entry["future"]["psnr"] is not None

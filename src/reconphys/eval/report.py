@@ -19,6 +19,7 @@ from .. import __version__
 from ..errors import InputError
 from ..io import atomic_folder
 from ..physics import ATTRIBUTES
+from ..pipeline.search import OBSERVABLES
 from .evaluate import INITIAL_SUFFIX, Results
 from .lpips import MIN_SIDE
 from .metrics import FOREGROUND_THRESHOLD, SSIM_SIGMA, SSIM_WINDOW
@@ -132,6 +133,7 @@ def write_csvs(results: Results, document: dict, folder: Path) -> None:
                 ]
             )
     names = ATTRIBUTES
+    bounds = [(o, end) for o in OBSERVABLES for end in (0, 1)]  # each interval's lo, hi
     with open(folder / "per_sample.csv", "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(
@@ -142,6 +144,7 @@ def write_csvs(results: Results, document: dict, folder: Path) -> None:
                 *metric_columns,
                 *[f"true_{n}" for n in names],
                 *[f"predicted_{n}" for n in names],
+                *[f"interval_{o}_{end}" for o in OBSERVABLES for end in ("lo", "hi")],
                 "seconds",
                 "failure",
                 "info",
@@ -158,6 +161,7 @@ def write_csvs(results: Results, document: dict, folder: Path) -> None:
                     *[_number(scores[w][m]) for w in scores for m in IMAGE_AND_POINT_METRICS],
                     *[_number(r.true_attributes[n]) for n in names],
                     *[_number(predicted.get(n)) for n in names],
+                    *[_number(r.intervals[o][e]) if r.intervals else "" for o, e in bounds],
                     _number(r.seconds),
                     r.failure or "",
                     json.dumps(r.info, sort_keys=True) if r.info else "",
