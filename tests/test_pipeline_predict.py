@@ -24,7 +24,7 @@ from reconphys.cli import app
 from reconphys.errors import InputError
 from reconphys.models.model_input import predictor_frames
 from reconphys.models.physics_predictor import resize_frames
-from reconphys.pipeline.search import network_intervals
+from reconphys.pipeline.search import GIVEN_GEOMETRY_TEMPERATURE, network_intervals, temperature_for
 from reconphys.render import Cameras, render
 from reconphys.render.cameras import dataset_views, intrinsics_from_fov
 
@@ -118,10 +118,19 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     for name, (low, high) in reference["intervals"].items():
         assert [low, high] == pytest.approx(expected[name], abs=1e-3)
         assert low <= reference["observables"][name] <= high
-    # the plain look with a given PLY: the search's profiles alone (the network's belief is
-    # multiplied in on a 3DGS predictor's geometry only)
-    assert summary["search"]["network_sigma"] is None
-    assert "times the network's belief" not in summary["intervals_how"]
+    # a given PLY: the search's profiles times the network's belief (the initial state is read
+    # from the masks, not known), as on a 3DGS predictor's geometry; the dataset's own asset and
+    # initial state (--sample, the † path) keep the profiles alone
+    assert summary["search"]["network_sigma"] == pytest.approx(
+        list(summary["network_sigma"].values()), abs=1e-3
+    )
+    assert "times the network's belief" in summary["intervals_how"]
+    found = summary["search"]
+    height, width = found["render_size"]
+    expected = temperature_for(height * width, found["supersample"])
+    assert found["temperature"] == pytest.approx(
+        [GIVEN_GEOMETRY_TEMPERATURE * t for t in expected], rel=1e-6
+    )
     assert reference["attributes"] == reference["feed_forward"]
     a, b = summary["feed_forward"], reference["attributes"]
     # H.264 at 32 px changes the input a little: the prediction may move, not jump

@@ -433,12 +433,17 @@ def predict_observation(
 
     intervals = None
     if refine:
-        from .search import PREDICTED_GEOMETRY_TEMPERATURE, search
+        from .search import GIVEN_GEOMETRY_TEMPERATURE, PREDICTED_GEOMETRY_TEMPERATURE, search
 
         started = time.perf_counter()
         count = predictor.num_frames
-        # the object-centric 3DGS predictor's geometry is not the object's: wider profiles
-        scale = PREDICTED_GEOMETRY_TEMPERATURE if object_centric else 1.0
+        # the object-centric 3DGS predictor's geometry is not the object's, and a given shape
+        # starts from the masks' velocity without spin: wider profiles
+        scale = 1.0
+        if object_centric:
+            scale = PREDICTED_GEOMETRY_TEMPERATURE
+        elif given is not None:
+            scale = GIVEN_GEOMETRY_TEMPERATURE
         asset, history = search(
             asset,
             observation.frames[:count],
@@ -448,8 +453,9 @@ def predict_observation(
             temperature_scale=scale,
             # that factor was chosen on such geometry as it is compared (supersampled or not)
             fine_temperature=not object_centric,
-            # on predicted geometry the fit alone is not to be trusted: times the network's belief
-            prior_sigma=sigma if predicted else None,
+            # on a recording's own geometry (predicted or given) and initial state (read from the
+            # masks) the fit alone is not to be trusted: times the network's belief
+            prior_sigma=sigma if predicted or given is not None else None,
         )
         timings["search"] = time.perf_counter() - started
         intervals = history["intervals"]
