@@ -18,23 +18,22 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 from collections import defaultdict
 from pathlib import Path
+from types import SimpleNamespace
 
 from reconphys.data.storage import read_manifest
+from reconphys.physics import ATTRIBUTES
+from reconphys.pipeline.search import OBSERVABLES
+from reconphys.pipeline.search import observables as observables_of
 
 NAMES = ("log k/m", "log d/m", "friction")
-KEYS = ("log_k_over_m", "log_d_over_m", "friction")
 
 
-def observables(row: dict, prefix: str) -> tuple[float, float, float]:
-    mass = float(row[f"{prefix}_mass"])
-    return (
-        math.log(float(row[f"{prefix}_stiffness"]) / mass),
-        math.log(float(row[f"{prefix}_damping"]) / mass),
-        float(row[f"{prefix}_friction"]),
-    )
+def observables(row: dict, prefix: str) -> list[float]:
+    """log k/m, log d/m, f of a per_sample.csv row's ``true_`` or ``predicted_`` attributes."""
+    attributes = {name: float(row[f"{prefix}_{name}"]) for name in ATTRIBUTES}
+    return observables_of(SimpleNamespace(**attributes)).tolist()
 
 
 def main() -> None:
@@ -69,7 +68,7 @@ def main() -> None:
                 true = observables(row, "true")
                 if row.get("interval_friction_lo"):
                     intervals += 1
-                    for j, key in enumerate(KEYS):
+                    for j, key in enumerate(OBSERVABLES):
                         lo, hi = float(row[f"interval_{key}_lo"]), float(row[f"interval_{key}_hi"])
                         inside[j] += lo <= true[j] <= hi
                 for j, (mine, theirs) in enumerate(

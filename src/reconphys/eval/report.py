@@ -133,7 +133,7 @@ def write_csvs(results: Results, document: dict, folder: Path) -> None:
                 ]
             )
     names = ATTRIBUTES
-    bounds = [(o, end) for o in OBSERVABLES for end in (0, 1)]  # each interval's lo, hi
+    bounds = [(o, i, end) for o in OBSERVABLES for i, end in enumerate(("lo", "hi"))]
     with open(folder / "per_sample.csv", "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(
@@ -144,7 +144,7 @@ def write_csvs(results: Results, document: dict, folder: Path) -> None:
                 *metric_columns,
                 *[f"true_{n}" for n in names],
                 *[f"predicted_{n}" for n in names],
-                *[f"interval_{o}_{end}" for o in OBSERVABLES for end in ("lo", "hi")],
+                *[f"interval_{o}_{end}" for o, _, end in bounds],
                 "seconds",
                 "failure",
                 "info",
@@ -161,7 +161,7 @@ def write_csvs(results: Results, document: dict, folder: Path) -> None:
                     *[_number(scores[w][m]) for w in scores for m in IMAGE_AND_POINT_METRICS],
                     *[_number(r.true_attributes[n]) for n in names],
                     *[_number(predicted.get(n)) for n in names],
-                    *[_number(r.intervals[o][e]) if r.intervals else "" for o, e in bounds],
+                    *[_number(r.intervals[o][i]) if r.intervals else "" for o, i, _ in bounds],
                     _number(r.seconds),
                     r.failure or "",
                     json.dumps(r.info, sort_keys=True) if r.info else "",

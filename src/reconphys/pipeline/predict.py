@@ -330,7 +330,6 @@ def predict_observation(
     dataset_asset = None if truth is None else truth.asset
     build_new = True  # a new asset from given or predicted Gaussians (not the dataset's own)
     object_centric = False  # the geometry is the object-centric 3DGS predictor's
-    predicted = False  # the geometry is a 3DGS predictor's (not given, not the dataset's)
     if gaussians is not None and mesh is not None:
         raise InputError("give either --gaussians or --mesh, not both", field="--mesh")
     given = gaussians if gaussians is not None else mesh
@@ -352,7 +351,6 @@ def predict_observation(
         if not isinstance(gs_model, LoadedGaussianPredictor):
             gs_model = load_gaussian_predictor(gs_model)
         object_centric = gs_model.model.config.crop
-        predicted = True
         distance = None
         if object_centric:  # the object-centric predictor places the object at its distance
             distance, how = object_distance(observation)
@@ -455,7 +453,7 @@ def predict_observation(
             fine_temperature=not object_centric,
             # on a recording's own geometry (predicted or given) and initial state (read from the
             # masks) the fit alone is not to be trusted: times the network's belief
-            prior_sigma=sigma if predicted or given is not None else None,
+            prior_sigma=sigma if build_new else None,
         )
         timings["search"] = time.perf_counter() - started
         intervals = history["intervals"]
