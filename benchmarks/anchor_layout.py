@@ -15,19 +15,15 @@ from __future__ import annotations
 
 import argparse
 import platform
-import shutil
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import torch
+from common import predict_bundle, user_bundle
 
-import reconphys
-from reconphys.assets.ply import write_ply
-from reconphys.capture import CameraSpec, write_camera
 from reconphys.data import DropDataset
-from reconphys.data.storage import video_name
 from reconphys.geometry import rigid_velocity
 from reconphys.pipeline.search import observables, search
 
@@ -44,25 +40,14 @@ def main() -> None:
     shifts = {"own": [], "predict": []}
     with tempfile.TemporaryDirectory() as folder:
         for i in range(min(args.limit, len(dataset))):
-            item, own = dataset[i], dataset.asset(i)
+            own = dataset.asset(i)
             state = dataset.meta(i)["initial_state"]
-            bundle = Path(folder) / item["id"]
-            bundle.mkdir()
-            shutil.copyfile(root / dataset.samples[i]["dir"] / video_name(0), bundle / "video.mp4")
-            size = item["frames"].shape[2]
-            camera = CameraSpec(item["K"][0].double(), item["world_to_cam"][0].double(), size, size)
-            write_camera(bundle / "camera.json", camera)
-            write_ply(bundle / "gaussians.ply", own.gaussians)
-            result = reconphys.predict(
-                bundle / "video.mp4",
-                camera=bundle / "camera.json",
-                gaussians=bundle / "gaussians.ply",
-                refine=False,
-            )
+            bundle = user_bundle(dataset, i, Path(folder))
+            result = predict_bundle(bundle, refine=False)
             observation = result.observation
             motion = torch.tensor(state["linear_velocity"] + state["angular_velocity"])
             true = observables(own.physics)
-            row = [item["id"][:28]]
+            row = [dataset.samples[i]["id"][:28]]
             for name, asset in (("own", own), ("predict", result.asset)):
                 v0 = rigid_velocity(asset.x0, motion[:3], motion[3:]).float()
                 started = replace(asset, physics=own.physics, v0=v0)

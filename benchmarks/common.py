@@ -1,12 +1,15 @@
 """Shared benchmark helpers: a description of the machine, CUDA-aware timing, the mean mask IoU
-of a clip, and a dataset's samples after its first objects (a validation split)."""
+of a clip, a dataset's samples after its first objects (a validation split), and a sample
+written as a user brings it to ``predict``."""
 
 from __future__ import annotations
 
 import os
 import platform
+import shutil
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import torch
 
@@ -70,3 +73,34 @@ def after_first_objects(
     listed = samples if order is None else order
     first = set(list(dict.fromkeys(s["object"] for s in listed))[:count])
     return [s for s in samples if s["object"] not in first]
+
+
+def user_bundle(dataset, index: int, folder: Path) -> Path:
+    """View 0 of sample ``index`` of a ``DropDataset`` written into ``folder``/ID as a user brings
+    it to ``predict``: ``video.mp4`` (the stored mp4), ``camera.json`` and the true Gaussians as
+    ``gaussians.ply`` → that folder."""
+    from reconphys.assets.ply import write_ply
+    from reconphys.capture import CameraSpec, write_camera
+    from reconphys.data.storage import video_name
+
+    item, entry = dataset[index], dataset.samples[index]
+    bundle = Path(folder) / entry["id"]
+    bundle.mkdir()
+    shutil.copyfile(dataset.root / entry["dir"] / video_name(0), bundle / "video.mp4")
+    height, width = item["frames"].shape[2:4]
+    K, w2c = item["K"][0].double(), item["world_to_cam"][0].double()
+    write_camera(bundle / "camera.json", CameraSpec(K, w2c, width, height))
+    write_ply(bundle / "gaussians.ply", dataset.asset(index).gaussians)
+    return bundle
+
+
+def predict_bundle(bundle: Path, **options):
+    """``reconphys.predict`` on a :func:`user_bundle` (mp4 + camera file + the true Gaussians)."""
+    import reconphys
+
+    return reconphys.predict(
+        bundle / "video.mp4",
+        camera=bundle / "camera.json",
+        gaussians=bundle / "gaussians.ply",
+        **options,
+    )
