@@ -75,15 +75,17 @@ def after_first_objects(
     return [s for s in samples if s["object"] not in first]
 
 
-def user_bundle(dataset, index: int, folder: Path) -> Path:
-    """View 0 of sample ``index`` of a ``DropDataset`` written into ``folder``/ID as a user brings
-    it to ``predict``: ``video.mp4`` (the stored mp4), ``camera.json`` and the true Gaussians as
-    ``gaussians.ply`` → that folder."""
+def user_bundle(dataset, index: int, folder: Path, item: dict | None = None) -> Path:
+    """View 0 of sample ``index`` of a ``DropDataset`` (of view 0) written into ``folder``/ID as a
+    user brings it to ``predict``: ``video.mp4`` (the stored mp4), ``camera.json`` and the true
+    Gaussians as ``gaussians.ply`` → that folder. ``item``: ``dataset[index]`` when already
+    decoded."""
     from reconphys.assets.ply import write_ply
     from reconphys.capture import CameraSpec, write_camera
     from reconphys.data.storage import video_name
 
-    item, entry = dataset[index], dataset.samples[index]
+    item = dataset[index] if item is None else item
+    entry = dataset.samples[index]
     bundle = Path(folder) / entry["id"]
     bundle.mkdir()
     shutil.copyfile(dataset.root / entry["dir"] / video_name(0), bundle / "video.mp4")

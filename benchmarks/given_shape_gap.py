@@ -36,7 +36,7 @@ from common import predict_bundle, user_bundle
 
 from reconphys.data import DropDataset
 from reconphys.geometry import rigid_velocity
-from reconphys.physics import ATTRIBUTE_RANGES
+from reconphys.physics import ATTRIBUTE_RANGES, ATTRIBUTES
 from reconphys.pipeline.demo import true_observables
 from reconphys.pipeline.search import (
     GIVEN_GEOMETRY_TEMPERATURE,
@@ -75,9 +75,7 @@ def main() -> None:
             prior = None
             if sigma is not None and not args.fit_alone:
                 prior = torch.tensor([sigma[name] for name in OBSERVABLES], dtype=torch.float64)
-            attributes = {
-                k: getattr(network, k) for k in ("mass", "stiffness", "damping", "friction")
-            }
+            attributes = {name: getattr(network, name) for name in ATTRIBUTES}
             state = meta["initial_state"]
             linear, angular = state["linear_velocity"], state["angular_velocity"]
             starts = {
@@ -86,12 +84,12 @@ def main() -> None:
                     result.asset, v0=rigid_velocity(result.asset.x0, linear, angular).float()
                 ),
                 "own_layout": replace(own, physics=replace(own.physics, **attributes)),
+                "joint_motion": result.asset,  # its motion searched too (below)
             }
             truth = np.array(list(true_observables(meta["attributes"]).values()))
             base.append(np.abs(trivial - truth))
             row = [f"{meta['id'][:28]} |ω| {np.linalg.norm(angular):.2f}"]
             masks_velocity = result.details["initial_velocity"]["linear_m_s"]
-            starts["joint_motion"] = result.asset
             for name in chosen:
                 asset = starts[name]
                 motion = None

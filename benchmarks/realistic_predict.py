@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import shutil
 import tempfile
 import time
 from dataclasses import replace
@@ -40,14 +39,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from common import after_first_objects
+from common import after_first_objects, user_bundle
 
 import reconphys
-from reconphys.assets.ply import write_ply
-from reconphys.capture import CameraSpec, write_camera
 from reconphys.capture.masks import subtract_background
 from reconphys.data import DropDataset
-from reconphys.data.storage import video_name
 from reconphys.errors import InputError
 from reconphys.eval.metrics import psnr
 from reconphys.physics import ATTRIBUTE_RANGES
@@ -93,14 +89,7 @@ def main() -> None:
         for index in range(min(args.limit, len(dataset))):
             meta = dataset.meta(index)
             item = dataset[index]
-            bundle = Path(folder) / meta["id"]
-            bundle.mkdir()
-            entry = dataset.samples[index]
-            shutil.copyfile(root / entry["dir"] / video_name(0), bundle / "video.mp4")
-            height, width = item["frames"].shape[2:4]
-            K, w2c = item["K"][0].double(), item["world_to_cam"][0].double()
-            write_camera(bundle / "camera.json", CameraSpec(K, w2c, width, height))
-            write_ply(bundle / "gaussians.ply", dataset.asset(index).gaussians)
+            bundle = user_bundle(dataset, index, Path(folder), item)
             truth = observables(meta["attributes"])
             if dataset.settings.scene == "plain":  # the object on black: its stored frames say
                 masks = subtract_background(item["frames"][0]) > 0.5
