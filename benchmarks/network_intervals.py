@@ -5,18 +5,24 @@ a realistic-look dataset cut out by its true masks or the shipped segmenter's, a
 ``feed_forward.py``), the members' standard deviation of log k/m, log d/m and friction
 (``models.physics_predictor.observable_spread``) against the ensemble's error: its rank
 correlation with the error, and the share of videos whose interval answer ± 1.2816 · a · spread
-holds the truth, for several factors a. ``pipeline/search.py``'s ``NETWORK_SPREAD_FACTOR`` is the
-one that holds it about 80 % of the time on objects the model never trained on — run it on a
-validation split, never a test split:
+holds the truth, for several factors a. An ensemble's factors (its JSON's ``spread_factor``) are
+those that hold it about 80 % of the time on objects it never trained on — run it on a validation
+split, never a test split:
 
     python benchmarks/network_intervals.py data/real_pybullet --split train --after-objects 849 \\
         --model src/reconphys/weights/physics_predictor_crop.safetensors --masks segmenter
     python benchmarks/network_intervals.py VALIDATION_FOLDER          # the shipped plain ensemble
+
+Each ensemble carries its own factors in its JSON ("spread_factor"; without one,
+``models.physics_predictor.DEFAULT_SPREAD_FACTOR``). ``--write`` stores the factor of the grid below
+whose interval holds the truth nearest 80 % of the time, per observable, into the model's JSON
+(`make model` does it on its validation drops, data/val200).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import platform
 import time
 from pathlib import Path
@@ -29,15 +35,16 @@ from scipy.stats import spearmanr
 
 from reconphys.data.dataset import DropDataset
 from reconphys.data.storage import read_manifest
+from reconphys.io import atomic_file
 from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
 from reconphys.models.physics_predictor import observable_spread
-from reconphys.models.shipped import load_predictor
+from reconphys.models.shipped import config_path, load_predictor
 from reconphys.physics import ATTRIBUTES
-from reconphys.pipeline.search import NETWORK_SPREAD_FACTOR, Z_10_90
+from reconphys.pipeline.search import Z_10_90
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
-FACTORS = (1.0, 2.0, 2.5, 3.0, 3.5, 4.0, 6.0)
+FACTORS = (1.0, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0)
 
 
 def main() -> None:
@@ -50,6 +57,9 @@ def main() -> None:
     )
     parser.add_argument("--masks", choices=("true", "segmenter"), default="true")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument(
+        "--write", action="store_true", help="store the factors nearest 80 %% in the model's JSON"
+    )
     args = parser.parse_args()
     set_cpu_threads(args.threads)
     predictor = load_predictor(args.model)
@@ -91,11 +101,31 @@ def main() -> None:
             f"{name:9} MAE {error[:, i].mean():.3f}, mean spread {spread[:, i].mean():.3f}, rank "
             f"correlation with the error {rho:+.2f}; 10–90 % holds the truth: {cells}"
         )
-    factor = np.array(NETWORK_SPREAD_FACTOR)
+    if args.write:
+        chosen = [  # the grid's factor whose coverage is nearest 80 % (ties: the wider)
+            min(
+                FACTORS[::-1],
+                key=lambda a: abs(np.mean(error[:, i] <= Z_10_90 * a * spread[:, i]) - 0.8),
+            )
+            for i in range(len(NAMES))
+        ]
+        path = config_path(predictor.path)
+        metadata = json.loads(path.read_text())
+        metadata["spread_factor"] = chosen
+        metadata["spread_factor_how"] = (
+            f"benchmarks/network_intervals.py on {len(error)} videos of {args.data.name} "
+            f"({args.split}): per observable, the factor whose 10–90 % interval held the truth "
+            "nearest 80 % of the time"
+        )
+        with atomic_file(path) as staged:
+            staged.write_text(json.dumps(metadata, indent=1, ensure_ascii=False) + "\n")
+        print(f"wrote spread_factor {chosen} into {path}")
+        predictor = load_predictor(args.model)
+    factor = np.array(predictor.spread_factor)
     held = np.mean(error <= Z_10_90 * factor * spread, 0)
     width = np.mean(2 * Z_10_90 * factor * spread, 0)
     print(
-        f"shipped factors {' / '.join(f'{a:g}' for a in factor)}: holds "
+        f"the model's factors {' / '.join(f'{a:g}' for a in factor)}: holds "
         + " / ".join(f"{h:.0%}" for h in held)
         + ", mean width "
         + " / ".join(f"{w:.2f}" for w in width)

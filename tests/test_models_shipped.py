@@ -22,6 +22,7 @@ from reconphys.data.settings import make_settings
 from reconphys.errors import InputError
 from reconphys.models import shipped
 from reconphys.models.physics_predictor import (
+    DEFAULT_SPREAD_FACTOR,
     PhysicsPredictor,
     PredictorConfig,
     PredictorEnsemble,
@@ -166,9 +167,30 @@ def test_bad_files_are_one_line_errors(saved):
         load_predictor(path)
 
     path.write_bytes(good)
+    for factor in ([3.0, 3.0], [3.0, -1.0, 4.0], [3.0, float("nan"), 4.0], "3"):
+        meta_path.write_text(json.dumps(dict(meta, spread_factor=factor)))
+        with pytest.raises(InputError, match="spread_factor must be 3 positive numbers"):
+            load_predictor(path)
+
     meta_path.unlink()
     with pytest.raises(InputError, match=r"m\.json is missing"):
         load_predictor(path)
+
+
+def test_the_belief_factor_is_the_models_own(saved):
+    """An ensemble's calibrated "spread_factor" is what it reports; without one, the default."""
+    _, path = saved
+    assert load_predictor(path).spread_factor == DEFAULT_SPREAD_FACTOR
+    meta_path = path.with_suffix(".json")
+    meta_path.write_text(
+        json.dumps(dict(json.loads(meta_path.read_text()), spread_factor=[1, 2, 5]))
+    )
+    assert load_predictor(path).spread_factor == (1, 2, 5)
+    shipped = json.loads(SHIPPED_PATH.with_suffix(".json").read_text())
+    assert (
+        len(shipped["spread_factor"]) == 3
+        and "network_intervals.py" in shipped["spread_factor_how"]
+    )
 
 
 # The shipped weights.

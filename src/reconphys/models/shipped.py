@@ -15,6 +15,7 @@ Commands that need a model find it without flags (:func:`default_model_path`): `
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +28,7 @@ from ..io import atomic_file, read_json
 from ..physics.model import ATTRIBUTE_RANGES, ATTRIBUTES
 from .model_input import object_crop
 from .physics_predictor import (
+    DEFAULT_SPREAD_FACTOR,
     LOG_SCALED,
     PhysicsPredictor,
     PredictorConfig,
@@ -143,6 +145,13 @@ class LoadedPredictor:
     def num_frames(self) -> int:
         return self.model.config.num_frames
 
+    @property
+    def spread_factor(self) -> tuple[float, float, float]:
+        """a per observable (log k/m, log d/m, f): the network's belief is a normal at its answer
+        with σ = a × its members' spread, a calibrated on validation meshes (the JSON's
+        "spread_factor"; else physics_predictor.DEFAULT_SPREAD_FACTOR)."""
+        return tuple(self.metadata.get("spread_factor", DEFAULT_SPREAD_FACTOR))
+
     @torch.no_grad()
     def predict(self, frames: Tensor) -> dict[str, Tensor]:
         """frames [B, T, H, W, 3] in [0, 1] of the model's view, T ≥ num_frames (the first
@@ -231,6 +240,17 @@ def load_predictor(
         raise InputError(
             f"weights do not match the config in {config_path(path).name} ({'; '.join(parts)})",
             source=str(path),
+        )
+    factor = metadata.get("spread_factor", DEFAULT_SPREAD_FACTOR)
+    if not (
+        isinstance(factor, (list, tuple))
+        and len(factor) == 3
+        and all(isinstance(a, (int, float)) and math.isfinite(a) and a > 0 for a in factor)
+    ):
+        raise InputError(
+            f"spread_factor must be 3 positive numbers, got {factor!r}",
+            source=str(config_path(path)),
+            field="spread_factor",
         )
     bad = [k for k, v in tensors.items() if v.is_floating_point() and not torch.isfinite(v).all()]
     if bad:

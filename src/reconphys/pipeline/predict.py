@@ -49,7 +49,6 @@ from ..models.reconstruct import (
 from ..physics import ATTRIBUTES
 from .samples import SampleTruth, load_input
 from .search import (
-    NETWORK_SPREAD_FACTOR,
     OBSERVABLES,
     Z_10_90,
     network_intervals,
@@ -66,11 +65,11 @@ INTERVALS_HOW = (
 )
 WITH_NETWORK_HOW = (
     "10–90 % of the posterior along each observable's profile (the others at their best) times "
-    "the network's belief (normal, σ = 3–4 × its members' spread): pipeline/search.py; the "
+    "the network's belief (normal, σ = 3–5 × its members' spread): pipeline/search.py; the "
     "search's 'undetermined' lists what the recording alone does not show"
 )
 NETWORK_HOW = (
-    "10–90 % of the network's belief alone (normal at its answer, σ = 3–4 × its members' spread; "
+    "10–90 % of the network's belief alone (normal at its answer, σ = 3–5 × its members' spread; "
     "--no-refine): how far its answer is from the truth on objects it never saw, not what this "
     "recording shows"
 )
@@ -402,10 +401,10 @@ def predict_observation(
         )
         out = predictor.model(frames.to(predictor.device))
     attributes = {name: float(out[name][0]) for name in ATTRIBUTES}
-    sigma = None  # [3] the network's belief: NETWORK_SPREAD_FACTOR × its members' spread
+    sigma = None  # [3] the network's belief: its calibrated spread_factor × its members' spread
     if "member_unit" in out:
         spread = observable_spread(out["member_unit"].cpu())[0]
-        sigma = torch.tensor(NETWORK_SPREAD_FACTOR, dtype=spread.dtype) * spread
+        sigma = torch.tensor(predictor.spread_factor, dtype=spread.dtype) * spread
         pairs = zip(OBSERVABLES, sigma.tolist(), strict=True)
         details["network_sigma"] = {name: round(value, 4) for name, value in pairs}
     timings["physics_network"] = time.perf_counter() - started

@@ -119,17 +119,6 @@ GIVEN_GEOMETRY_TEMPERATURE = 4.0
 # and checked as that geometry is compared; docs/training.md "Intervals".
 FINE_TEMPERATURE = (2.5, 1.0, 3.0)
 QUANTILES = (0.1, 0.9)
-# The network's own belief about each observable: a normal distribution at the ensemble's mean
-# answer, σ = this × the members' standard deviation (models.physics_predictor.observable_spread),
-# per observable (log k/m, log d/m, f). The seeds' spread tracks the error only loosely (rank
-# correlation 0.1–0.3) and is too narrow by itself (its ±1.28 σ held the truth on 34–38 %).
-# Chosen on validation meshes only (never a test split) as the factors that keep every coverage
-# measured there inside 70–90 %: the network alone (benchmarks/network_intervals.py) × 3 / 3 / 4
-# held the truth on 80 / 73 / 86 % of 200 plain drops and tosses of the shipped ensemble's 100
-# validation meshes and 82 / 80 / 89 % of 200 realistic ones of the crop ensemble's (segmenter
-# masks); times the search's profiles on 56 realistic ones (predict's default path there) on
-# 80 / 79 / 75 % (friction × 3: 66 %). docs/usage.md "The network's belief and the recording's".
-NETWORK_SPREAD_FACTOR = (3.0, 3.0, 4.0)
 # An observable whose interval is at least this share of the prior's own 10–90 % width is not
 # shown by the recording: its best fit is noise (or a wrong geometry compensating), so the start
 # (the network's value) is kept for it and the history lists it under "undetermined".
