@@ -22,7 +22,6 @@ whose interval holds the truth nearest 80 % of the time, per observable, into th
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 from pathlib import Path
@@ -35,10 +34,9 @@ from scipy.stats import spearmanr
 
 from reconphys.data.dataset import DropDataset
 from reconphys.data.storage import read_manifest
-from reconphys.io import atomic_file
 from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
 from reconphys.models.physics_predictor import observable_spread
-from reconphys.models.shipped import config_path, load_predictor
+from reconphys.models.shipped import config_path, load_predictor, save_predictor
 from reconphys.physics import ATTRIBUTES
 from reconphys.pipeline.search import Z_10_90
 from reconphys.threads import set_cpu_threads
@@ -109,18 +107,14 @@ def main() -> None:
             )
             for i in range(len(NAMES))
         ]
-        path = config_path(predictor.path)
-        metadata = json.loads(path.read_text())
-        metadata["spread_factor"] = chosen
-        metadata["spread_factor_how"] = (
+        predictor.metadata["spread_factor"] = chosen
+        predictor.metadata["spread_factor_how"] = (
             f"benchmarks/network_intervals.py on {len(error)} videos of {args.data.name} "
             f"({args.split}): per observable, the factor whose 10–90 % interval held the truth "
             "nearest 80 % of the time"
         )
-        with atomic_file(path) as staged:
-            staged.write_text(json.dumps(metadata, indent=1, ensure_ascii=False) + "\n")
-        print(f"wrote spread_factor {chosen} into {path}")
-        predictor = load_predictor(args.model)
+        save_predictor(predictor.model, predictor.path, predictor.metadata)  # weights unchanged
+        print(f"wrote spread_factor {chosen} into {config_path(predictor.path)}")
     factor = np.array(predictor.spread_factor)
     held = np.mean(error <= Z_10_90 * factor * spread, 0)
     width = np.mean(2 * Z_10_90 * factor * spread, 0)
