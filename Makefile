@@ -34,12 +34,12 @@ bench: install
 	$(BIN)/python benchmarks/bench_simulator.py
 	$(BIN)/python benchmarks/bench_renderer.py
 
-# The shipped physics predictor's recipe (docs/training.md "Twice the drops of each mesh"; ~1.5 h
-# on 2 CPU cores): pybullet's meshes (the meshes extra), the held-out test set data/pyb, two draws
-# of drops and tosses of every other mesh rendered at 64 px (seeds 3 and 13), five silhouette-track
-# networks (seeds 0-4) trained supervised on the observables at 32 px, the factors of their
-# belief's spread chosen on 200 drops and tosses of the validation meshes, their ensemble copied
-# into the package's weights. The previous CNN recipe (cpu_small) is `make model-cnn`.
+# The shipped physics predictor's recipe (docs/training.md "Three draws of drops of each mesh";
+# ~2 h on 2 CPU cores): pybullet's meshes (the meshes extra), the held-out test set data/pyb, three
+# draws of drops and tosses of every other mesh rendered at 64 px (seeds 3, 13 and 23), five
+# silhouette-track networks (seeds 0-4) trained supervised on the observables at 32 px, the
+# factors of their belief's spread chosen on 200 drops and tosses of the validation meshes, their
+# ensemble copied into the package's weights. The previous CNN recipe (cpu_small) is `make model-cnn`.
 model: install
 	$(BIN)/python -m pip install -q -e '.[meshes]'
 	$(BIN)/reconphys make-data --config configs/data_pyb.toml --workers 2 --out data/pyb
@@ -48,6 +48,8 @@ model: install
 	    --out data/pybullet64
 	$(BIN)/reconphys make-data --config configs/data_pybullet.toml --resolution 64 --seed 13 \
 	    --workers 2 --out data/pybullet64_s13
+	$(BIN)/reconphys make-data --config configs/data_pybullet.toml --resolution 64 --seed 23 \
+	    --workers 2 --out data/pybullet64_s23
 	$(BIN)/reconphys train configs/track_pybullet.toml --no-progress
 	$(BIN)/python benchmarks/held_out_meshes.py --validation data/pybullet_meshes data/val_meshes
 	$(BIN)/reconphys make-data --config configs/data_small.toml --source data/val_meshes \
