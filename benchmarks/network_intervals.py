@@ -4,10 +4,10 @@ For an ensemble physics model (members ≥ 2) on a dataset's videos (view 0, the
 a realistic-look dataset cut out by its true masks or the shipped segmenter's, as
 ``feed_forward.py``), the members' standard deviation of log k/m, log d/m and friction
 (``models.physics_predictor.observable_spread``) against the ensemble's error: its rank
-correlation with the error, and the share of videos whose interval answer ± 1.2816 · a · spread
-holds the truth, for several factors a. An ensemble's factors (its JSON's ``spread_factor``) are
-those that hold it about 80 % of the time on objects it never trained on — run it on a validation
-split, never a test split:
+correlation with the error, and the share of videos whose interval answer ± 1.2816 · a · σ₁
+(σ₁: the spread) holds the truth, for several factors a. An ensemble's factors (its JSON's
+``spread_factor``) are those that hold it about 80 % of the time on objects it never trained on
+— run it on a validation split, never a test split:
 
     python benchmarks/network_intervals.py data/real_pybullet --split train --after-objects 849 \\
         --model src/reconphys/weights/physics_predictor_crop.safetensors --masks segmenter
@@ -17,6 +17,12 @@ Each ensemble carries its own factors in its JSON ("spread_factor"; without one,
 ``models.physics_predictor.DEFAULT_SPREAD_FACTOR``). ``--write`` stores the factor of the grid below
 whose interval holds the truth nearest 80 % of the time, per observable, into the model's JSON
 (`make model` does it on its validation drops, data/val200).
+
+An ensemble trained with ``model.scale_head = true`` also predicts its own error's scale b per
+video (a Laplace scale, :func:`reconphys.models.physics_predictor.observable_scale`); for it the
+table's σ₁ is the spread and the scale together (``physics_predictor.network_sigma`` before its
+factors: the root sum of squares of the spread and ln 5 · b / 1.28), and the scale alone's
+coverage of answer ± a · ln 5 · b is printed after it.
 """
 
 from __future__ import annotations
@@ -35,14 +41,15 @@ from scipy.stats import spearmanr
 from reconphys.data.dataset import DropDataset
 from reconphys.data.storage import read_manifest
 from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
-from reconphys.models.physics_predictor import observable_spread
+from reconphys.models.physics_predictor import LN5, network_sigma
 from reconphys.models.shipped import config_path, load_predictor, save_predictor
 from reconphys.physics import ATTRIBUTES
 from reconphys.pipeline.search import Z_10_90
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
-FACTORS = (1.0, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0)
+FACTORS = (0.8, 0.9, 1.0, 1.1, 1.2, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0)
+SCALE_FACTORS = (0.8, 1.0, 1.2, 1.5)  # × the scale head's Laplace 10–90 % half-width
 
 
 def main() -> None:
@@ -66,7 +73,7 @@ def main() -> None:
         dataset.samples = after_first_objects(dataset.samples, args.after_objects)
     realistic = read_manifest(args.data)["parsed_settings"].scene != "plain"
     segmenter = load_mask_segmenter() if realistic and args.masks == "segmenter" else None
-    errors, spreads = [], []
+    errors, spreads, scales = [], [], []
     started = time.perf_counter()
     for index in range(len(dataset)):
         item = dataset[index]
@@ -79,11 +86,14 @@ def main() -> None:
             frames = frames * masks[..., None]
         with torch.no_grad():
             out = predictor.predict(frames[None])
-        if "member_unit" not in out:
-            raise SystemExit(f"{predictor.path}: not an ensemble (members < 2): no spread")
+        belief = network_sigma(out, (1.0, 1.0, 1.0))  # before the factors
+        if belief is None:
+            raise SystemExit(f"{predictor.path}: no belief (a single network, no scale head)")
         answer = observables_of({k: out[k][0] for k in ATTRIBUTES})
         errors.append((answer - observables_of(dataset.meta(index)["attributes"])).tolist())
-        spreads.append(observable_spread(out["member_unit"])[0].tolist())
+        spreads.append(belief[0].tolist())
+        if "observable_scale" in out:
+            scales.append(out["observable_scale"][0].tolist())
     error, spread = np.abs(np.array(errors)), np.array(spreads)
     print(
         f"{len(error)} videos of {args.data} ({args.split}, after {args.after_objects} objects, "
@@ -96,9 +106,21 @@ def main() -> None:
             f"a={a:g}: {np.mean(error[:, i] <= Z_10_90 * a * spread[:, i]):.0%}" for a in FACTORS
         )
         print(
-            f"{name:9} MAE {error[:, i].mean():.3f}, mean spread {spread[:, i].mean():.3f}, rank "
+            f"{name:9} MAE {error[:, i].mean():.3f}, mean σ₁ {spread[:, i].mean():.3f}, rank "
             f"correlation with the error {rho:+.2f}; 10–90 % holds the truth: {cells}"
         )
+    if scales:  # model.scale_head: the members' own estimate of their error (a Laplace scale)
+        scale = np.array(scales)
+        for i, name in enumerate(NAMES):
+            rho = spearmanr(error[:, i], scale[:, i])[0]
+            own = "  ".join(
+                f"a={a:g}: {np.mean(error[:, i] <= a * LN5 * scale[:, i]):.0%}"
+                for a in SCALE_FACTORS
+            )
+            print(
+                f"{name:9} the scale head alone: mean b {scale[:, i].mean():.3f}, rank correlation "
+                f"with the error {rho:+.2f}; ± a · ln 5 · b holds the truth: {own}"
+            )
     if args.write:
         chosen = [  # the grid's factor whose coverage is nearest 80 % (ties: the wider)
             min(

@@ -248,3 +248,59 @@ def test_track_network_learns_a_sub_pixel_slide():
     error = (predicted - distance).abs().mean()
     trivial = (distance - distance.mean()).abs().mean()
     assert error < trivial / 3, (float(error), float(trivial))
+
+
+def test_scale_head_leaves_the_answer_alone_and_learns_the_error():
+    """model.scale_head: the same seed gives the same answer with or without it; its Laplace
+    loss sends no gradient into the answer's weights, only into the scale head; the loss is
+    lowest at b = the mean |error| (the minimiser of |e| / b + log b); the softplus floor is in
+    the observables' natural units; an ensemble's scale is its members' mean."""
+    from dataclasses import replace
+
+    from reconphys.models.physics_predictor import PredictorEnsemble, observable_scale
+    from reconphys.physics.model import observable_bounds
+    from reconphys.train.objective import observable_scale_loss
+
+    with_scale = replace(TRACK, scale_head=True)
+    clip = _sliding_square(torch.tensor([0.5, 1.0, 2.0]))
+    torch.manual_seed(7)
+    plain = PhysicsPredictor(TRACK).eval()
+    torch.manual_seed(7)
+    scaled = PhysicsPredictor(with_scale).eval()
+    out = scaled(clip)
+    torch.testing.assert_close(out["unit"], plain(clip)["unit"])
+    assert out["observable_scale"].shape == (3, 3) and (out["observable_scale"] > 0).all()
+    assert "observable_scale" not in plain(clip)
+
+    scaled.train()
+    out = scaled(clip)
+    true = torch.tensor([[1.0, 300.0, 1.0, 0.4]] * 3)
+    observable_scale_loss(out, out["observable_scale"], true).backward()
+    answer = [n for n, p in scaled.named_parameters() if not n.startswith("scale.")]
+    assert all(scaled.get_parameter(n).grad is None for n in answer)
+    assert all(p.grad is not None for p in scaled.scale.parameters())
+
+    # the loss's minimum: b = mean |e| (in the observables' own units)
+    errors = torch.tensor([0.1, 0.3, 0.5, 0.9], dtype=torch.float64)
+    width = observable_bounds()[:, 1] - observable_bounds()[:, 0]
+
+    def loss_at(b: float) -> float:
+        attributes = {"mass": torch.ones(4), "stiffness": torch.full((4,), 300.0),
+                      "damping": torch.ones(4), "friction": 0.5 + errors.float() / 2}  # fmt: skip
+        truth = torch.tensor([[1.0, 300.0, 1.0, 0.5]] * 4)
+        scale = torch.tensor([[1.0, 1.0, b]] * 4) * width.float()
+        return float(observable_scale_loss(attributes, scale, truth))
+
+    best = float((errors / 2).mean())  # friction errors 0.05–0.45: mean 0.225
+    assert loss_at(best) < min(loss_at(best * 0.7), loss_at(best * 1.4))
+
+    # softplus floor and natural units
+    tiny = observable_scale(torch.full((1, 3), -50.0))
+    torch.testing.assert_close(tiny[0], 1e-3 * width.float(), rtol=1e-4, atol=0)
+
+    # an ensemble averages its members' scales
+    torch.manual_seed(8)
+    ensemble = PredictorEnsemble(with_scale, 2).eval()
+    out = ensemble(clip)
+    mean = torch.stack([m(clip)["observable_scale"] for m in ensemble.members]).mean(0)
+    torch.testing.assert_close(out["observable_scale"], mean)

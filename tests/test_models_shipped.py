@@ -193,6 +193,45 @@ def test_the_belief_factor_is_the_models_own(saved):
     )
 
 
+def test_a_scale_heads_belief_joins_the_spread(tmp_path):
+    """network_sigma: the members' spread, the scale head's Laplace scale as the normal of the
+    same 10–90 % width (ln 5 · b / 1.2816), or their root sum of squares, × the factor; a model
+    with a scale head saved without factors gets 1 / 1 / 1, and round-trips its head."""
+    from statistics import NormalDist
+
+    from reconphys.models.physics_predictor import SCALE_HEAD_SPREAD_FACTOR, network_sigma
+
+    units = torch.rand(3, 2, 4, dtype=torch.float64)
+    spread = observable_spread(units)
+    b = torch.tensor([[0.2, 0.5, 0.1], [0.4, 0.3, 0.05]], dtype=torch.float64)
+    as_normal = math.log(5) * b / NormalDist().inv_cdf(0.9)
+    factor = (2.0, 3.0, 4.0)
+    torch.testing.assert_close(
+        network_sigma({"member_unit": units}, factor),
+        spread * torch.tensor(factor, dtype=torch.float64),
+    )
+    torch.testing.assert_close(network_sigma({"observable_scale": b}, (1.0, 1.0, 1.0)), as_normal)
+    both = network_sigma({"member_unit": units, "observable_scale": b}, factor)
+    torch.testing.assert_close(
+        both, (spread**2 + as_normal**2).sqrt() * torch.tensor(factor, dtype=torch.float64)
+    )
+    assert network_sigma({"unit": units[0]}, factor) is None
+
+    config = replace(TINY, scale_head=True)
+    torch.manual_seed(1)
+    ensemble = PredictorEnsemble(config, 2).eval()
+    path = save_predictor(
+        ensemble, tmp_path / "s.safetensors", model_metadata(config, 0, 0.03, members=2)
+    )
+    loaded = load_predictor(path)
+    assert loaded.model.config.scale_head and loaded.spread_factor == SCALE_HEAD_SPREAD_FACTOR
+    frames = torch.rand(1, 3, 16, 16, 3)
+    with torch.no_grad():
+        torch.testing.assert_close(
+            loaded.predict(frames)["observable_scale"], ensemble(frames)["observable_scale"]
+        )
+
+
 # The shipped weights.
 @pytest.fixture(scope="module")
 def model():

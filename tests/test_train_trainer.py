@@ -533,3 +533,33 @@ def test_more_sources_add_the_same_objects_drops_from_other_seeds(folder, tmp_pa
     expected = object_crop(stored[len(stored) - 1]["frames"][0], side)  # plain look: on black
     assert mixed[last]["frames"].shape[-3:-1] == (side, side)
     assert torch.allclose(mixed[last]["frames"][0], expected, atol=1e-6)
+
+
+def test_a_scale_head_trains_beside_the_answer_without_changing_it(folder, tmp_path):
+    """model.scale_head = true: the same run's answer weights are those of the run without it,
+    to rounding (the head reads detached features, learns from the detached error and is clipped
+    by its own norm), the head's Laplace term is logged, and the exported model carries it."""
+    common = (
+        f"data.source={folder}", "objective.kind=supervised", "model.inputs=track",
+        "model.track_channels=8", "train.steps=4", "optim.grad_clip=0.05",
+    )  # fmt: skip
+    plain = train(tiny(tmp_path / "plain", *common), progress=False, log=lambda line: None)
+    scaled = train(
+        tiny(tmp_path / "scaled", *common, "model.scale_head=true"),
+        progress=False,
+        log=lambda line: None,
+    )
+    answer = plain.model.state_dict()
+    weights = scaled.model.state_dict()
+    assert set(weights) - set(answer) and all(
+        k.startswith("scale.") for k in set(weights) - set(answer)
+    )
+    for key, value in answer.items():  # to rounding: float sums may group differently
+        torch.testing.assert_close(weights[key], value, rtol=1e-5, atol=1e-7, msg=key)
+    log = read_log(tmp_path / "scaled")
+    assert all(math.isfinite(r["scale"]) for r in log.values())
+    assert any(r["grad_norm"] > 0.05 for r in read_log(tmp_path / "plain").values())  # clipped
+    loaded = load_predictor(tmp_path / "scaled")
+    assert loaded.model.config.scale_head
+    frames = torch.rand(1, 4, 16, 16, 3)
+    assert loaded.predict(frames)["observable_scale"].shape == (1, 3)

@@ -27,7 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from ..physics.model import ATTRIBUTE_RANGES, ATTRIBUTES
+from ..capture.calibrate import Z_10_90
+from ..physics.model import ATTRIBUTE_RANGES, ATTRIBUTES, observable_bounds
 from .encoders import build_encoder, encoder_names, group_norm
 
 LOG_SCALED = ("mass", "stiffness", "damping")
@@ -49,6 +50,7 @@ class PredictorConfig:
     inputs: str = "video"  # "video": the CNN trunk (+ branches above); "track": TrackNetwork alone
     track_channels: int = 64  # inputs = "track": width of the track's temporal convolutions
     crop: bool = False  # read the object's motion-box crop (model_input.object_crop), not the frame
+    scale_head: bool = False  # also predict its own error's scale (observable_scale; detached)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -306,6 +308,29 @@ def observable_spread(member_unit: Tensor) -> Tensor:
     return values.std(0)
 
 
+# What an ensemble with a scale head (PredictorConfig.scale_head) gets without its own factors:
+# the scale is the error's own estimate, trained for it, not a spread that needs stretching.
+SCALE_HEAD_SPREAD_FACTOR = (1.0, 1.0, 1.0)
+LN5 = math.log(5.0)  # a Laplace's 10–90 % interval: its centre ± ln 5 · b
+
+
+def network_sigma(out: dict[str, Tensor], factor: tuple[float, float, float]) -> Tensor | None:
+    """σ [B, 3] of the network's normal belief about log k/m, log d/m and f from its output:
+    ``factor`` × √(spread² + (ln 5 · b / z)²), the members' spread (:func:`observable_spread`;
+    an ensemble) and the scale head's Laplace scale b as the normal whose 10–90 % interval has
+    the same width (z = 1.2816; ``observable_scale``), whichever the output holds. None when it
+    holds neither (a single network without a scale head: no belief)."""
+    parts = []
+    if "member_unit" in out:
+        parts.append(observable_spread(out["member_unit"].double()))
+    if "observable_scale" in out:
+        parts.append(LN5 * out["observable_scale"].double() / Z_10_90)
+    if not parts:
+        return None
+    combined = parts[0] if len(parts) == 1 else torch.stack(parts).square().sum(0).sqrt()
+    return torch.tensor(factor, dtype=combined.dtype, device=combined.device) * combined
+
+
 def normalize_attributes(attributes: dict[str, Tensor] | Tensor) -> Tensor:
     """Inverse of :func:`attributes_from_unit`: attributes (dict, or [..., 4] in
     ATTRIBUTES) → [..., 4] in [0, 1] (clamped)."""
@@ -337,14 +362,28 @@ def resize_frames(frames: Tensor, resolution: int) -> Tensor:
 # --- the predictor --------------------------------------------------------------------------
 
 
-def _mlp_head(channels: int, hidden: tuple[int, ...]) -> nn.Sequential:
-    """Features [B, channels] → four logits [B, 4] (GELU MLP)."""
+def _mlp_head(
+    channels: int, hidden: tuple[int, ...], outputs: int = len(ATTRIBUTES)
+) -> nn.Sequential:
+    """Features [B, channels] → logits [B, outputs] (GELU MLP; four: the attributes)."""
     layers, previous = [], channels
     for width in hidden:
         layers += [nn.Linear(previous, width), nn.GELU()]
         previous = width
-    layers.append(nn.Linear(previous, len(ATTRIBUTES)))
+    layers.append(nn.Linear(previous, outputs))
     return nn.Sequential(*layers)
+
+
+# The scale head's floor, in the observables' [0, 1] units: keeps log b finite.
+MIN_SCALE = 1e-3
+
+
+def observable_scale(logits: Tensor) -> Tensor:
+    """The scale head's logits [..., 3] → the expected |error| of the answer's log k/m, log d/m
+    and friction [..., 3] in their natural units (a Laplace scale b: its 10–90 % interval is the
+    answer ± ln 5 · b), through softplus in the observables' [0, 1] units."""
+    bounds = observable_bounds().to(logits.dtype).to(logits.device)
+    return (F.softplus(logits) + MIN_SCALE) * (bounds[:, 1] - bounds[:, 0])
 
 
 class PhysicsPredictor(nn.Module):
@@ -356,6 +395,7 @@ class PhysicsPredictor(nn.Module):
         if config.inputs == "track":
             self.track = TrackNetwork(config.num_frames, config.track_channels)
             self.head = _mlp_head(self.track.out_channels, config.mlp_hidden)
+            self.scale = self._scale_head(self.track.out_channels)
             return
         self.track = None
         if config.encoder not in encoder_names():
@@ -371,18 +411,34 @@ class PhysicsPredictor(nn.Module):
         self.temporal = TemporalAttention(c, config.attention_heads, config.num_frames)
         self.silhouette = SilhouetteBranch(c) if config.silhouette else None
         self.head = _mlp_head(c, config.mlp_hidden)
+        self.scale = self._scale_head(c)
+
+    def _scale_head(self, channels: int) -> nn.Sequential | None:
+        """Built last, so a config with it initialises every other weight as one without."""
+        if not self.config.scale_head:
+            return None
+        return _mlp_head(channels, self.config.mlp_hidden, outputs=3)
+
+    def _outputs(self, features: Tensor) -> dict[str, Tensor]:
+        """Features [B, C] → the answer, and the scale of its error when the config has one
+        (read from the features detached: it never changes what the answer learns)."""
+        unit = torch.sigmoid(self.head(features))
+        out = {"unit": unit, **attributes_from_unit(unit)}
+        if self.scale is not None:
+            out["observable_scale"] = observable_scale(self.scale(features.detach()))
+        return out
 
     def forward(self, frames: Tensor) -> dict[str, Tensor]:
         """frames [B, T, H, W, 3] in [0, 1] (one view; T ≤ num_frames, H = W = resolution) →
-        {"unit": [B, 4] in (0, 1), "mass", "stiffness", "damping", "friction": [B]}."""
+        {"unit": [B, 4] in (0, 1), "mass", "stiffness", "damping", "friction": [B]}, and with
+        ``scale_head`` "observable_scale" [B, 3] (:func:`observable_scale`)."""
         if frames.dim() != 5 or frames.shape[-1] != 3:
             raise ValueError(f"frames: expected [B, T, H, W, 3], got {list(frames.shape)}")
         b, t, h, w, _ = frames.shape
         if t > self.config.num_frames:
             raise ValueError(f"frames: at most {self.config.num_frames} frames, got {t}")
         if self.track is not None:
-            unit = torch.sigmoid(self.head(self.track(frames)))
-            return {"unit": unit, **attributes_from_unit(unit)}
+            return self._outputs(self.track(frames))
         pixels = motion_channels(frames) if self.config.motion else frames
         images = pixels.reshape(b * t, h, w, pixels.shape[-1]).permute(0, 3, 1, 2)
         features = self.encoder(images)  # [B·T, C, h', w']
@@ -391,8 +447,7 @@ class PhysicsPredictor(nn.Module):
         pooled = self.temporal(tokens).mean(1)
         if self.silhouette is not None:
             pooled = pooled + self.silhouette(frames)
-        unit = torch.sigmoid(self.head(pooled))
-        return {"unit": unit, **attributes_from_unit(unit)}
+        return self._outputs(pooled)
 
 
 class PredictorEnsemble(nn.Module):
@@ -413,7 +468,12 @@ class PredictorEnsemble(nn.Module):
         return self.members[0].config
 
     def forward(self, frames: Tensor) -> dict[str, Tensor]:
-        """As :meth:`PhysicsPredictor.forward`, plus "member_unit": [M, B, 4] each member's."""
-        units = torch.stack([member(frames)["unit"] for member in self.members])  # [M, B, 4]
+        """As :meth:`PhysicsPredictor.forward`, plus "member_unit": [M, B, 4] each member's;
+        with ``scale_head``, "observable_scale" is the members' mean scale [B, 3]."""
+        outs = [member(frames) for member in self.members]
+        units = torch.stack([out["unit"] for out in outs])  # [M, B, 4]
         unit = units.mean(0)
-        return {"unit": unit, **attributes_from_unit(unit), "member_unit": units}
+        result = {"unit": unit, **attributes_from_unit(unit), "member_unit": units}
+        if "observable_scale" in outs[0]:
+            result["observable_scale"] = torch.stack([o["observable_scale"] for o in outs]).mean(0)
+        return result

@@ -30,6 +30,7 @@ from .model_input import object_crop
 from .physics_predictor import (
     DEFAULT_SPREAD_FACTOR,
     LOG_SCALED,
+    SCALE_HEAD_SPREAD_FACTOR,
     PhysicsPredictor,
     PredictorConfig,
     PredictorEnsemble,
@@ -148,9 +149,13 @@ class LoadedPredictor:
     @property
     def spread_factor(self) -> tuple[float, float, float]:
         """a per observable (log k/m, log d/m, f): the network's belief is a normal at its answer
-        with σ = a × its members' spread, a calibrated on validation meshes (the JSON's
-        "spread_factor"; else physics_predictor.DEFAULT_SPREAD_FACTOR)."""
-        return tuple(self.metadata.get("spread_factor", DEFAULT_SPREAD_FACTOR))
+        with σ = a × its members' spread (and its scale head's, physics_predictor.network_sigma),
+        a calibrated on validation meshes (the JSON's "spread_factor"; else
+        physics_predictor.DEFAULT_SPREAD_FACTOR, or SCALE_HEAD_SPREAD_FACTOR with a scale head)."""
+        default = (
+            SCALE_HEAD_SPREAD_FACTOR if self.model.config.scale_head else DEFAULT_SPREAD_FACTOR
+        )
+        return tuple(self.metadata.get("spread_factor", default))
 
     @torch.no_grad()
     def predict(self, frames: Tensor) -> dict[str, Tensor]:

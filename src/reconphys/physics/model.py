@@ -18,6 +18,7 @@ Coulomb coefficient (dimensionless); gravity in m/s²; lengths in metres.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -36,6 +37,22 @@ ATTRIBUTE_RANGES = {
     "damping": (0.1, 5.0),
     "friction": (0.0, 1.0),
 }
+
+
+def observable_bounds() -> Tensor:
+    """[3, 2] the reachable (lo, hi) of the observables a video determines — log k/m, log d/m
+    (natural logs of the SI ratios) and friction — inside :data:`ATTRIBUTE_RANGES`: k/m from
+    k_lo/m_hi to k_hi/m_lo, and so on (float64)."""
+    r = ATTRIBUTE_RANGES
+    (m_lo, m_hi), (k_lo, k_hi), (d_lo, d_hi) = r["mass"], r["stiffness"], r["damping"]
+    return torch.tensor(
+        [
+            [math.log(k_lo / m_hi), math.log(k_hi / m_lo)],
+            [math.log(d_lo / m_hi), math.log(d_hi / m_lo)],
+            list(r["friction"]),
+        ],
+        dtype=torch.float64,
+    )
 
 
 def _batched(value, dtype: torch.dtype, device) -> Tensor:

@@ -39,7 +39,7 @@ from ..models.gaussian_shipped import (
     load_gaussian_predictor,
 )
 from ..models.model_input import network_input
-from ..models.physics_predictor import observable_spread
+from ..models.physics_predictor import network_sigma
 from ..models.reconstruct import (
     initial_velocity_fit,
     object_distance,
@@ -401,10 +401,10 @@ def predict_observation(
         )
         out = predictor.model(frames.to(predictor.device))
     attributes = {name: float(out[name][0]) for name in ATTRIBUTES}
-    sigma = None  # [3] the network's belief: its calibrated spread_factor × its members' spread
-    if "member_unit" in out:
-        spread = observable_spread(out["member_unit"].cpu())[0]
-        sigma = torch.tensor(predictor.spread_factor, dtype=spread.dtype) * spread
+    # [3] the network's belief: its calibrated spread_factor × its members' spread (⊕ its scale)
+    sigma = network_sigma({k: v.cpu() for k, v in out.items()}, predictor.spread_factor)
+    if sigma is not None:
+        sigma = sigma[0]
         pairs = zip(OBSERVABLES, sigma.tolist(), strict=True)
         details["network_sigma"] = {name: round(value, 4) for name, value in pairs}
     timings["physics_network"] = time.perf_counter() - started

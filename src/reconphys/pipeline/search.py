@@ -48,7 +48,7 @@ from ..capture.calibrate import Z_10_90  # the normal's 90 % quantile (QUANTILES
 from ..capture.window import comparison_view, object_window
 from ..geometry import rigid_velocity
 from ..physics import SpringMassModel, State, deform_means, rollout, scene_stable_substeps
-from ..physics.model import ATTRIBUTE_RANGES
+from ..physics.model import ATTRIBUTE_RANGES, observable_bounds
 from ..render import render
 
 SPANS = (2.0, 0.7, 0.25)  # half-widths of the candidate grids in natural log of k/m and d/m
@@ -131,20 +131,6 @@ def observables(physics) -> Tensor:  # [3] (log k/m, log d/m, f)
             math.log(physics.stiffness / physics.mass),
             math.log(physics.damping / physics.mass),
             physics.friction,
-        ],
-        dtype=torch.float64,
-    )
-
-
-def observable_bounds() -> Tensor:  # [3, 2] the reachable (lo, hi) of each observable
-    """Inside the attribute ranges: k/m from k_lo/m_hi to k_hi/m_lo, and so on."""
-    r = ATTRIBUTE_RANGES
-    (m_lo, m_hi), (k_lo, k_hi), (d_lo, d_hi) = r["mass"], r["stiffness"], r["damping"]
-    return torch.tensor(
-        [
-            [math.log(k_lo / m_hi), math.log(k_hi / m_lo)],
-            [math.log(d_lo / m_hi), math.log(d_hi / m_lo)],
-            list(r["friction"]),
         ],
         dtype=torch.float64,
     )

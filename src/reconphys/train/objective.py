@@ -10,34 +10,40 @@ Gaussians: ground-truth geometry, an upper bound that reports must label as such
 
 from __future__ import annotations
 
-import math
-
 import torch
 from torch import Tensor
 
 from ..models.physics_predictor import normalize_attributes
 from ..physics import ATTRIBUTES
-from ..physics.model import ATTRIBUTE_RANGES
+from ..physics.model import observable_bounds
 from .config import SUPERVISED_TARGETS
-
-
-def _log_ratio_bounds(numerator: str) -> tuple[float, float]:
-    """Bounds of log(numerator / mass) over the docs/design.md#attribute-ranges ranges."""
-    (n_low, n_high), (m_low, m_high) = ATTRIBUTE_RANGES[numerator], ATTRIBUTE_RANGES["mass"]
-    return math.log(n_low / m_high), math.log(n_high / m_low)
 
 
 def normalize_observables(attributes: Tensor) -> Tensor:
     """[..., 4] attributes (ATTRIBUTES) → [..., 4] (log m, log k/m, log d/m, f), each scaled
-    to [0, 1] over its range: the quantities a video determines (docs/design.md#physical-model), and
-    the mass."""
+    to [0, 1] over its range (:func:`observable_bounds`): the quantities a video determines
+    (docs/design.md#physical-model), and the mass."""
     mass, stiffness, damping, friction = attributes.unbind(-1)
-    columns = [normalize_attributes(attributes)[..., 0]]
-    for name, value in (("stiffness", stiffness), ("damping", damping)):
-        low, high = _log_ratio_bounds(name)
-        columns.append((torch.log(value / mass) - low) / (high - low))
-    columns.append(friction)
-    return torch.stack(columns, -1)
+    bounds = observable_bounds().to(attributes.dtype)
+    ratios = torch.stack([torch.log(stiffness / mass), torch.log(damping / mass), friction], -1)
+    scaled = (ratios - bounds[:, 0]) / (bounds[:, 1] - bounds[:, 0])
+    return torch.cat([normalize_attributes(attributes)[..., :1], scaled], -1)
+
+
+def observable_scale_loss(
+    attributes: dict[str, Tensor],  # predicted, name → [B]
+    scale: Tensor,  # [B, 3] predicted mean |error| of log k/m, log d/m, f (natural units)
+    true: Tensor,  # [B, 4] true attributes in ATTRIBUTES
+) -> Tensor:
+    """Laplace negative log-likelihood of the answer's error under the predicted scale b:
+    mean of |e| / b + log b over the batch and the three observables, both in the observables'
+    [0, 1] units. The error is detached: this term trains the scale alone (its minimum is b =
+    E|e| given the input), never the answer."""
+    predicted = torch.stack([attributes[n] for n in ATTRIBUTES], -1)
+    error = (normalize_observables(predicted) - normalize_observables(true))[..., 1:].detach()
+    bounds = observable_bounds().to(scale.dtype)
+    b = scale / (bounds[:, 1] - bounds[:, 0])
+    return (error.abs() / b + b.log()).mean()
 
 
 def supervised_loss(

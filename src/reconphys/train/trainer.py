@@ -64,7 +64,7 @@ from . import distributed
 from .checkpoint import CHECKPOINT, load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from .config import TrainConfig, differing_keys
 from .data import Batch, StepSampler, TrainingSamples, collate
-from .objective import supervised_loss
+from .objective import observable_scale_loss, supervised_loss
 
 LOG = "log.jsonl"
 TENSORBOARD = "tensorboard"
@@ -140,11 +140,24 @@ def compute_losses(
         terms["loss"] = (
             terms["photometric"] + config.objective.supervised_weight * terms["supervised"]
         )
+    if "observable_scale" in out:  # model.scale_head: its own term, which moves it alone
+        terms["scale"] = observable_scale_loss(
+            attributes, out["observable_scale"].float(), batch.attributes
+        )
+        terms["loss"] = terms["loss"] + terms["scale"]
     with torch.no_grad():
         detached = {k: v.detach() for k, v in attributes.items()}
         terms["attribute_error"] = supervised_loss(detached, batch.attributes)
         terms["observable_error"] = supervised_loss(detached, batch.attributes, "observables")
     return terms
+
+
+def clip_groups(model: PhysicsPredictor) -> tuple[list[Tensor], list[Tensor]]:
+    """The model's parameters → (the answer's, the scale head's; empty without one), clipped
+    each by its own norm: with ``model.scale_head`` the answer trains exactly as without it."""
+    scale = list(model.scale.parameters()) if model.scale is not None else []
+    ids = {id(p) for p in scale}
+    return [p for p in model.parameters() if id(p) not in ids], scale
 
 
 class Trainer:
@@ -417,7 +430,10 @@ class Trainer:
         self.scaler.scale(terms["loss"]).backward()  # every rank, always: DDP all-reduces here
         self.scaler.unscale_(self.optimizer)
         limit = config.optim.grad_clip if config.optim.grad_clip > 0 else math.inf
-        grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), limit)
+        answer, scale = clip_groups(self.model)
+        grad_norm = torch.nn.utils.clip_grad_norm_(answer, limit)
+        if scale:  # its own norm: the scale head's gradients never shrink the answer's step
+            torch.nn.utils.clip_grad_norm_(scale, limit)
         names = sorted(terms)
         values = torch.stack([terms[n].detach().float() for n in names]).cpu()
         values = distributed.all_reduce_mean(values.to(self.device), context).cpu()
