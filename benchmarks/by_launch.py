@@ -36,15 +36,21 @@ def observables(row: dict, prefix: str) -> list[float]:
     return observables_of(SimpleNamespace(**attributes)).tolist()
 
 
+def launches(data: Path) -> dict[str, str]:
+    """Sample id → its launch ("drop" or "toss"; samples made before tosses: "drop")."""
+    launch_of = {}
+    for sample in read_manifest(data)["samples"]:
+        meta = json.loads((data / sample["dir"] / "sample.json").read_text())
+        launch_of[sample["id"]] = meta["initial_state"].get("launch", "drop")
+    return launch_of
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("report", type=Path, help="folder written by reconphys evaluate --out")
     parser.add_argument("data", type=Path, help="the dataset folder it evaluated")
     args = parser.parse_args()
-    launch_of = {}
-    for sample in read_manifest(args.data)["samples"]:
-        meta = json.loads((args.data / sample["dir"] / "sample.json").read_text())
-        launch_of[sample["id"]] = meta["initial_state"].get("launch", "drop")
+    launch_of = launches(args.data)
     rows = defaultdict(dict)  # method → sample → row
     with open(args.report / "per_sample.csv", newline="") as file:
         for row in csv.DictReader(file):

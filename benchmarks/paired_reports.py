@@ -17,13 +17,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 from pathlib import Path
 
 import numpy as np
-from by_launch import observables
-
-from reconphys.data.storage import read_manifest
+from by_launch import launches, observables
 
 BOOTSTRAP = 4000
 
@@ -45,12 +42,9 @@ def bootstrap_interval(samples: np.ndarray, statistic, rng: np.random.Generator)
     return np.percentile(np.array(draws), [5, 95], axis=0)
 
 
-def drop_ratios(rows: dict, method: str, data: Path, rng: np.random.Generator) -> str:
-    """The method's drops' MAE ratios to trivial, each with its 90 % bootstrap interval."""
-    launch = {}
-    for sample in read_manifest(data)["samples"]:
-        meta = json.loads((data / sample["dir"] / "sample.json").read_text())
-        launch[sample["id"]] = meta["initial_state"].get("launch", "drop")
+def drop_ratios(rows: dict, method: str, launch: dict[str, str], rng: np.random.Generator) -> str:
+    """The method's drops' MAE ratios to trivial (``launch``: sample id → launch, from
+    by_launch.launches), each with its 90 % bootstrap interval."""
     drops = [
         s
         for (m, s) in rows
@@ -114,8 +108,9 @@ def main() -> None:
             f"{(diff < -0.5).sum()}; {dropped} not in both)"
         )
         if args.data:
+            launch = launches(args.data[index])
             for name, rows in (("before", before), ("after", after)):
-                print(f"  {name}: {drop_ratios(rows, args.method, args.data[index], rng)}")
+                print(f"  {name}: {drop_ratios(rows, args.method, launch, rng)}")
     everything = np.concatenate(pooled)
     low, high = bootstrap_interval(everything, np.mean, rng)
     print(

@@ -219,6 +219,7 @@ class Trainer:
         np.random.seed(seed)  # noqa: NPY002 (legacy global state, seeded for third-party code)
         random.seed(seed)
         self.model = PhysicsPredictor(config.predictor_config()).to(self.device)
+        self.clip_groups = clip_groups(self.model)  # the same parameter objects for the whole run
         o = config.optim
         self.optimizer = torch.optim.AdamW(
             self.model.parameters(), lr=o.lr, betas=(o.beta1, o.beta2), weight_decay=o.weight_decay
@@ -430,7 +431,7 @@ class Trainer:
         self.scaler.scale(terms["loss"]).backward()  # every rank, always: DDP all-reduces here
         self.scaler.unscale_(self.optimizer)
         limit = config.optim.grad_clip if config.optim.grad_clip > 0 else math.inf
-        answer, scale = clip_groups(self.model)
+        answer, scale = self.clip_groups
         grad_norm = torch.nn.utils.clip_grad_norm_(answer, limit)
         if scale:  # its own norm: the scale head's gradients never shrink the answer's step
             torch.nn.utils.clip_grad_norm_(scale, limit)
