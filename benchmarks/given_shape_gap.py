@@ -102,6 +102,7 @@ def main() -> None:
                     observation.camera,
                     masks=observation.masks[:20],
                     temperature_scale=1.0 if args.fit_alone else GIVEN_GEOMETRY_TEMPERATURE,
+                    rebuilt=True,  # as predict: the law the given path was chosen under
                     prior_sigma=prior,
                     motion=motion,
                 )

@@ -38,13 +38,14 @@ from reconphys.pipeline.search import (
     observables,
     profile_interval,
     search,
+    temperature_for,
 )
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
-# τ·pixels tried
-PRODUCTS = (30, 100, 200, 300, 400, 500, 600, 700, 800, 1000, 1200, 1500, 2000, 3000, 5000, 8000)
-PRODUCTS_FINE = (500, 750, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 4000, 5000, 8000, 12000)
+# τ·pixels at REFERENCE_PIXELS tried (pipeline/search.py's law carries them to each sample's size)
+PRODUCTS = (100, 200, 300, 400, 500, 600, 700, 800, 1000, 1200, 1500, 2000, 3000, 5000)
+PRODUCTS_FINE = (400, 600, 800, 1000, 1500, 2000, 2500, 3000, 4000, 5000, 8000, 12000, 20000)
 FRAMES = 20  # frames 0..19: the predictor's window
 
 
@@ -124,6 +125,7 @@ def main() -> None:
             "intervals": [history["intervals"][n] for n in OBSERVABLES],
             "profiles": [history["profiles"][n] for n in OBSERVABLES],
             "render_size": history["render_size"],
+            "size": int(observation.frames.shape[2]),  # the recording's width in pixels
             "supersample": history["supersample"],
         }
         rows.append(row)
@@ -166,8 +168,10 @@ def coverage_line(rows: list[dict], intervals: str = "intervals") -> str:
 
 
 def calibrate(rows: list[dict]) -> None:
-    """Intervals for a range of τ·pixels (each sample's τ = that / its compared pixels) from the
-    stored profiles; per observable, the product whose coverage is nearest 80 %. Supersampled
+    """Intervals for a range of products (each sample's τ = ``temperature_for(its compared pixels,
+    products=...)``) from the stored profiles; per observable, the product whose coverage is
+    nearest 80 %, over all rows and per recording size (the law's exponent is right when the
+    sizes agree). Supersampled
     comparisons (fine assets) are calibrated apart: their factor over TEMPERATURE_PIXELS is
     FINE_TEMPERATURE in pipeline/search.py."""
     fine = [r for r in rows if r.get("supersample", 1) > 1]
@@ -198,17 +202,25 @@ def calibrate_group(rows: list[dict], products: tuple[int, ...]) -> list[int]:
     best = [None] * 3  # per observable: (|coverage − 0.8|, product)
     for product in products:
         for r in rows:
-            temperature = product / (r["render_size"][0] * r["render_size"][1])
+            temperature = temperature_for(
+                r["render_size"][0] * r["render_size"][1], products=(product,) * 3
+            )
             r["trial"] = [
                 profile_interval(
                     torch.tensor(p["values"]),
                     torch.tensor(p["errors"]),
                     tuple(bounds[i].tolist()),
-                    temperature,
+                    temperature[i],
                 )
                 for i, p in enumerate(r["profiles"])
             ]
-        print(f"τ·pixels = {product:<5} {coverage_line(rows, 'trial')}")
+        sizes = sorted({r["size"] for r in rows if "size" in r})
+        by_size = "".join(
+            f"\n    {size} px: {coverage_line([r for r in rows if r.get('size') == size], 'trial')}"
+            for size in sizes
+            if len(sizes) > 1
+        )
+        print(f"τ·pixels = {product:<5} {coverage_line(rows, 'trial')}{by_size}")
         for i in range(3):
             coverage = sum(r["trial"][i][0] <= r["true"][i] <= r["trial"][i][1] for r in rows)
             miss = abs(coverage / len(rows) - 0.8)

@@ -127,7 +127,8 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     assert "times the network's belief" in summary["intervals_how"]
     found = summary["search"]
     height, width = found["render_size"]
-    expected = temperature_for(height * width, found["supersample"])
+    # the rebuilt asset's law (the one its factor and the belief were chosen under)
+    expected = temperature_for(height * width, found["supersample"], rebuilt=True)
     assert found["temperature"] == pytest.approx(
         [GIVEN_GEOMETRY_TEMPERATURE * t for t in expected], rel=1e-6
     )

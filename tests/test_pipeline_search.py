@@ -23,6 +23,10 @@ from reconphys.pipeline.search import (
     FINE_TEMPERATURE,
     MAX_SUPERSAMPLE,
     PREDICTED_GEOMETRY_TEMPERATURE,
+    REBUILT_FINE_TEMPERATURE,
+    REBUILT_TEMPERATURE_PIXELS,
+    REFERENCE_PIXELS,
+    TEMPERATURE_EXPONENT,
     TEMPERATURE_PIXELS,
     attributes_of,
     lighting_gain,
@@ -197,9 +201,14 @@ def test_the_networks_own_intervals_are_its_normal_belief_cut_to_the_reachable_r
 
 
 def test_the_temperature_falls_as_the_compared_pixels_grow():
-    """τ = 2 / N_eff with N_eff ∝ pixels: four times the pixels, a quarter of τ; and on the
-    quadratic profile above, half the interval's width."""
-    assert temperature_for(4000) == pytest.approx([t / 4 for t in temperature_for(1000)])
+    """τ = products / REFERENCE_PIXELS × (REFERENCE_PIXELS / pixels)^TEMPERATURE_EXPONENT: at the
+    reference, τ·pixels is the product; four times the pixels, 4^exponent less τ; and on a
+    quadratic profile the interval's width goes as √τ."""
+    assert temperature_for(REFERENCE_PIXELS) == pytest.approx(
+        [t / REFERENCE_PIXELS for t in TEMPERATURE_PIXELS]
+    )
+    shrink = 4.0**TEMPERATURE_EXPONENT
+    assert temperature_for(4000) == pytest.approx([t / shrink for t in temperature_for(1000)])
     values = torch.linspace(0.0, 10.0, 401, dtype=torch.float64)
     errors = 1e-2 + 0.01 * (values - 5.0) ** 2
     widths = [
@@ -208,16 +217,33 @@ def test_the_temperature_falls_as_the_compared_pixels_grow():
         )
         for p in (1000, 4000)
     ]
-    assert widths[1] == pytest.approx(widths[0] / 2, rel=0.02)
+    assert widths[1] == pytest.approx(widths[0] / shrink**0.5, rel=0.02)
+
+
+def test_a_rebuilt_asset_keeps_the_law_its_factors_were_chosen_under():
+    """A predicted or given shape (rebuilt=True): τ = REBUILT_TEMPERATURE_PIXELS / pixels (× the
+    rebuilt fine factors when supersampled), not the own asset's steeper law: the two agree at
+    no size but are each what their calibration says."""
+    for pixels in (300, 1024, 3300):
+        assert temperature_for(pixels, rebuilt=True) == pytest.approx(
+            [t / pixels for t in REBUILT_TEMPERATURE_PIXELS]
+        )
+        assert temperature_for(pixels, supersample=2, rebuilt=True) == pytest.approx(
+            [
+                t * f / pixels
+                for t, f in zip(REBUILT_TEMPERATURE_PIXELS, REBUILT_FINE_TEMPERATURE, strict=True)
+            ]
+        )
+    assert temperature_for(3300)[1] < 0.2 * temperature_for(3300, rebuilt=True)[1]
 
 
 def test_a_supersampled_comparison_has_its_own_temperature():
     """Fine assets (compared supersampled) take TEMPERATURE_PIXELS × FINE_TEMPERATURE, whatever
     the factor s > 1; coarse ones TEMPERATURE_PIXELS alone."""
-    coarse = temperature_for(1000)
-    assert coarse == pytest.approx([t / 1000 for t in TEMPERATURE_PIXELS])
+    coarse = temperature_for(REFERENCE_PIXELS)
+    assert coarse == pytest.approx([t / REFERENCE_PIXELS for t in TEMPERATURE_PIXELS])
     for s in (2, 3, MAX_SUPERSAMPLE):
-        fine = temperature_for(1000, supersample=s)
+        fine = temperature_for(REFERENCE_PIXELS, supersample=s)
         assert fine == pytest.approx([c * f for c, f in zip(coarse, FINE_TEMPERATURE, strict=True)])
 
 

@@ -453,6 +453,7 @@ def predict_observation(
             # on a recording's own geometry (predicted or given) and initial state (read from the
             # masks) the fit alone is not to be trusted: times the network's belief
             prior_sigma=sigma if build_new else None,
+            rebuilt=build_new,  # τ by the law the belief and the factors were chosen under
         )
         timings["search"] = time.perf_counter() - started
         intervals = history["intervals"]

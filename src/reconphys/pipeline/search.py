@@ -78,15 +78,33 @@ TIE = 1e-6
 OBSERVABLES = ("log_k_over_m", "log_d_over_m", "friction")
 PROFILE_POINTS = 9  # evenly over each observable's range
 PROFILE_LOCAL = (-1.0, -0.5, -0.2, 0.2, 0.5, 1.0)  # × the last span, around the best
-# Temperature of the profile posterior, relative to the best error: τ = 2 / (effective number of
+# Temperature of the profile posterior on a sample's own asset and initial state (``evaluate``'s
+# † search, ``predict --sample``), relative to the best error: τ = 2 / (effective number of
 # independent pixels), and that number grows with the pixels compared (the window after
-# :func:`comparison_view`), so τ = TEMPERATURE_PIXELS / pixels, one product per observable.
-# Calibrated by ``benchmarks/search_refinement.py --calibrate`` on 40 videos of the validation
-# meshes the shipped model never trained on (never a test split): per observable, the product
-# whose 10–90 % intervals cover the truth nearest 80 % of the time (80 % / 80 % / 78 %).
-# Calibrating on the model's own training meshes gives narrower d/m intervals (600) that covered
-# only 64 % of held-out drops: docs/training.md "Intervals".
-TEMPERATURE_PIXELS = (1000.0, 1500.0, 500.0)  # log k/m, log d/m, friction
+# :func:`comparison_view`, at most 64 px a side). Measured, it grows faster than the pixels: on
+# validation meshes the shipped model never trained on, the τ whose 10–90 % intervals cover the
+# truth 80 % of the time is ~4× smaller at 128-px recordings (~3,300 pixels compared) than a
+# τ ∝ 1/pixels law carried from 32 px (~770) gives, so τ = TEMPERATURE_PIXELS / REFERENCE_PIXELS ×
+# (REFERENCE_PIXELS / pixels)^TEMPERATURE_EXPONENT, one product per observable (at 1,024 pixels, a
+# 32 × 32 comparison, τ·pixels = TEMPERATURE_PIXELS). Calibrated by ``benchmarks/
+# search_refinement.py --rows`` on data/val200 (100 drops and tosses at 32 px) and data/val128 (80
+# drops at 128 px), never a test split: exponent 2 puts both sizes' 80 % points at one product per
+# observable (81 % / 83 % log k/m, 78 % / 81 % log d/m, 80 % / 78 % friction, 32 / 128 px); the
+# 1/pixels law (exponent 1, products 1000 / 1500 / 500, chosen at 32 px on an earlier model) covered
+# 73 / 88 / 79 % at 32 px and 92 / 92 / 84 % at 128 px. docs/training.md "Intervals".
+REFERENCE_PIXELS = 1024
+TEMPERATURE_EXPONENT = 2.0
+TEMPERATURE_PIXELS = (1000.0, 500.0, 400.0)  # log k/m, log d/m, friction: τ·pixels at 1,024 pixels
+# The law on a rebuilt asset (a predicted shape, a given PLY or mesh: ``search(rebuilt=True)``,
+# what ``predict`` searches, its profiles times the network's belief): the law before, τ =
+# (1000, 1500, 500) / pixels (× (2.5, 1, 3) supersampled), under which the two factors below and
+# the belief factors were chosen. There the fit's error is the wrong shape, spring layout and
+# initial state more than pixel noise, and does not shrink with the pixels: the law above made
+# the answers worse on 40 plain validation drops at 128 px read without a PLY (MAE log k/m / log
+# d/m 0.242 / 0.511 → 0.294 / 0.633; docs/training.md "Intervals").
+REBUILT_TEMPERATURE_PIXELS = (1000.0, 1500.0, 500.0)
+REBUILT_TEMPERATURE_EXPONENT = 1.0
+REBUILT_FINE_TEMPERATURE = (2.5, 1.0, 3.0)
 # × the temperature on the object-centric 3DGS predictor's geometry (no PLY given): the model is
 # wrong in more than pixel noise there — the predicted shape's hidden side, size and spring layout
 # differ from the object's, and the best fit of k/m compensates for them. Chosen on 20 realistic
@@ -95,7 +113,7 @@ TEMPERATURE_PIXELS = (1000.0, 1500.0, 500.0)  # log k/m, log d/m, friction
 # the 20, each time further from the truth (MAE 1.54 / 1.95 with a camera file: 0.52× / 0.63× the
 # midpoint guess's), at 4× the errors are 0.52 / 1.01 (1.54× / 1.21×), the same as at 16× on the
 # first folder; docs/usage.md "Realistic recordings end to end".
-PREDICTED_GEOMETRY_TEMPERATURE = 4.0
+PREDICTED_GEOMETRY_TEMPERATURE = 4.0  # × the rebuilt asset's law
 # × the temperature on a given PLY or mesh (``predict --gaussians/--mesh``), whose fit is also
 # multiplied by the network's belief: the shape is the object's, but the initial state is read
 # from the masks (the velocity along the view is poorly seen, the spin not at all) and the frames
@@ -106,18 +124,19 @@ PREDICTED_GEOMETRY_TEMPERATURE = 4.0
 # 0.266 / 0.548 / 0.166), 0.260 / 0.528 / 0.178 times the belief at 1×, 0.254 / 0.537 / 0.165
 # at 4× (intervals cover 80 % / 67 % / 77 %). On 32-px recordings the MAE does not move and the
 # intervals come out too narrow (about 60 %); docs/usage.md "A given shape".
-GIVEN_GEOMETRY_TEMPERATURE = 4.0
+GIVEN_GEOMETRY_TEMPERATURE = 4.0  # × the rebuilt asset's law
 # × the temperature (log k/m, log d/m, f) where the comparison is supersampled (a fine asset: a
-# dense PLY, the paper's 20,000 Gaussians at 512 px). The best fit's residual is then far smaller
-# than a coarse asset's, but the fit's error does not shrink as much: with TEMPERATURE_PIXELS
-# alone the paper-size intervals held the truth on 42 % / 58 % / 92 % of 12 held-out drops.
-# Calibrated by ``benchmarks/search_refinement.py --calibrate`` on validation meshes only
-# (data/val512: 30 paper-preset drops at 512 px of the shipped ensemble's 100 validation meshes,
-# supersampled 2–4×; never a test split): the products nearest 80 % coverage are 2500 / 1500 /
-# 1500 (with TEMPERATURE_PIXELS: 60 % / 80 % / 70 %). Not applied on the 3DGS predictor's
-# geometry (``search(fine_temperature=False)``), whose PREDICTED_GEOMETRY_TEMPERATURE was chosen
-# and checked as that geometry is compared; docs/training.md "Intervals".
-FINE_TEMPERATURE = (2.5, 1.0, 3.0)
+# dense PLY, the paper's 20,000 Gaussians at 512 px; a third of the data's 2,000-Gaussian assets at
+# 128 px). The best fit's residual is then far smaller than a coarse asset's, but the fit's error
+# does not shrink as much, so the profiles need a larger τ. Calibrated by ``benchmarks/
+# search_refinement.py --rows`` on validation meshes only, pooled: the 22 supersampled drops of
+# data/val128 (2×, 128 px) and data/val512 (30 paper-preset drops at 512 px, 2–4×, searched from
+# the model shipped before 2026-11-27's three-draw ensemble): the products nearest 80 % are 5000 /
+# 4000 / 2500 (covering 86 / 91 / 86 % at 128 px, 73 / 83 / 77 % at 512 px). Not applied on the
+# 3DGS predictor's geometry (``search(fine_temperature=False)``), whose
+# PREDICTED_GEOMETRY_TEMPERATURE was chosen and checked as that geometry is compared;
+# docs/training.md "Intervals".
+FINE_TEMPERATURE = (5.0, 8.0, 6.25)
 QUANTILES = (0.1, 0.9)
 # An observable whose interval is at least this share of the prior's own 10–90 % width is not
 # shown by the recording: its best fit is noise (or a wrong geometry compensating), so the start
@@ -309,14 +328,28 @@ def scaled_colours(gaussians: Gaussians, gain: Tensor) -> Gaussians:
     return replace(gaussians, sh0=(colours - 0.5) / SH_C0)
 
 
-def temperature_for(pixels: int, supersample: int = 1) -> tuple[float, float, float]:
+def temperature_for(
+    pixels: int,
+    supersample: int = 1,
+    products: tuple[float, float, float] | None = None,  # τ·pixels at REFERENCE_PIXELS
+    rebuilt: bool = False,  # a rebuilt asset (predicted or given shape): its own law
+) -> tuple[float, float, float]:
     """τ of each observable's profile posterior (log k/m, log d/m, f) for a compared view of
-    ``pixels`` pixels (≥ 1), rendered ``supersample``× larger (:func:`supersampling`; > 1: ×
-    FINE_TEMPERATURE)."""
-    factors = FINE_TEMPERATURE if supersample > 1 else (1.0, 1.0, 1.0)
+    ``pixels`` pixels (≥ 1), rendered ``supersample``× larger (:func:`supersampling`; > 1: × the
+    fine factors): products / REFERENCE_PIXELS × (REFERENCE_PIXELS / pixels)^exponent, with
+    TEMPERATURE_PIXELS, TEMPERATURE_EXPONENT and FINE_TEMPERATURE on a sample's own asset, the
+    REBUILT_ ones on a rebuilt asset."""
+    if rebuilt:
+        own, exponent, fine = (
+            REBUILT_TEMPERATURE_PIXELS, REBUILT_TEMPERATURE_EXPONENT, REBUILT_FINE_TEMPERATURE
+        )  # fmt: skip
+    else:
+        own, exponent, fine = TEMPERATURE_PIXELS, TEMPERATURE_EXPONENT, FINE_TEMPERATURE
+    factors = fine if supersample > 1 else (1.0, 1.0, 1.0)
+    shrink = (REFERENCE_PIXELS / max(pixels, 1)) ** exponent
     return tuple(
-        product * factor / max(pixels, 1)
-        for product, factor in zip(TEMPERATURE_PIXELS, factors, strict=True)
+        product / REFERENCE_PIXELS * shrink * factor
+        for product, factor in zip(products or own, factors, strict=True)
     )
 
 
@@ -386,6 +419,7 @@ def search(
     # one per observable; None: temperature_for(compared pixels, supersampling)
     masks: Tensor | None = None,  # [T, H, W] the object's masks: compare only around them
     temperature_scale: float = 1.0,  # × the default temperature (predicted geometry: wider)
+    rebuilt: bool = False,  # a rebuilt asset (predicted or given shape): τ by its own law
     fine_temperature: bool = True,  # × FINE_TEMPERATURE when supersampled (default temperature)
     motion: Tensor | None = None,  # [6] initial (linear m/s, angular rad/s): searched with them
     silhouette_weight: float = 0.0,  # × the silhouettes' squared error, added (needs masks)
@@ -419,9 +453,10 @@ def search(
     compared = replace(asset, gaussians=scaled_colours(asset.gaussians, gain))
     size = list(frames.shape[1:3])
     if temperature is None:
+        pixels, compared_supersample = size[0] * size[1], supersample if fine_temperature else 1
         temperature = tuple(
             t * temperature_scale
-            for t in temperature_for(size[0] * size[1], supersample if fine_temperature else 1)
+            for t in temperature_for(pixels, compared_supersample, rebuilt=rebuilt)
         )
     elif isinstance(temperature, (int, float)):
         temperature = (float(temperature),) * 3
