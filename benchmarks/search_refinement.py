@@ -200,6 +200,7 @@ def calibrate_group(rows: list[dict], products: tuple[int, ...]) -> list[int]:
         f"({pixels[0]}–{pixels[-1]}), supersampled {supersample}"
     )
     best = [None] * 3  # per observable: (|coverage − 0.8|, product)
+    sizes = sorted({r["size"] for r in rows if "size" in r})  # recording widths, when stored
     for product in products:
         for r in rows:
             temperature = temperature_for(
@@ -214,7 +215,6 @@ def calibrate_group(rows: list[dict], products: tuple[int, ...]) -> list[int]:
                 )
                 for i, p in enumerate(r["profiles"])
             ]
-        sizes = sorted({r["size"] for r in rows if "size" in r})
         by_size = "".join(
             f"\n    {size} px: {coverage_line([r for r in rows if r.get('size') == size], 'trial')}"
             for size in sizes
