@@ -34,9 +34,10 @@ bench: install
 	$(BIN)/python benchmarks/bench_simulator.py
 	$(BIN)/python benchmarks/bench_renderer.py
 
-# The shipped physics predictor's recipe (docs/training.md "Three draws of drops of each mesh";
-# ~2 h on 2 CPU cores): pybullet's meshes (the meshes extra), the held-out test set data/pyb, three
-# draws of drops and tosses of every other mesh rendered at 64 px (seeds 3, 13 and 23), five
+# The shipped physics predictor's recipe (docs/training.md "Stretched meshes"; ~2.7 h on 2 CPU
+# cores): pybullet's meshes (the meshes extra), the held-out test set data/pyb, three draws of drops
+# and tosses of every other mesh rendered at 64 px (seeds 3, 13 and 23) and a fourth of them
+# stretched by up to 4x (seed 33), five
 # silhouette-track networks (seeds 0-4) trained supervised on the observables at 32 px, the
 # factors of their belief's spread chosen on 200 drops and tosses of the validation meshes, their
 # ensemble copied into the package's weights. The previous CNN recipe (cpu_small) is `make model-cnn`.
@@ -50,6 +51,8 @@ model: install
 	    --workers 2 --out data/pybullet64_s13
 	$(BIN)/reconphys make-data --config configs/data_pybullet.toml --resolution 64 --seed 23 \
 	    --workers 2 --out data/pybullet64_s23
+	$(BIN)/reconphys make-data --config configs/data_pybullet.toml --resolution 64 --seed 33 \
+	    --stretch 4 --workers 2 --out data/pybullet64_x33
 	$(BIN)/reconphys train configs/track_pybullet.toml --no-progress
 	$(BIN)/python benchmarks/held_out_meshes.py --validation data/pybullet_meshes data/val_meshes
 	$(BIN)/reconphys make-data --config configs/data_small.toml --source data/val_meshes \

@@ -13,6 +13,10 @@ recording: its frames times the object's masks — the stored true masks (``--ma
 shipped mask segmenter's (``--masks segmenter``, what a user without masks gets). Its test-only
 folders have no training split: ``--trivial-from DATA`` takes the medians of another dataset's.
 
+``--by-aspect`` splits the ratios by how elongated each object is: the spread (standard
+deviation) of its anchors along their longest principal axis over that along their shortest, in
+bins below 2.5, 2.5–4 and from 4 (docs/training.md "Stretched meshes").
+
 ``--curve PNG`` draws the ratios against each model's number of training videos (its model.json):
 a data curve, one panel per observable, drops and all (docs/images/track_data_curve.png).
 """
@@ -20,12 +24,14 @@ a data curve, one panel per observable, drops and all (docs/images/track_data_cu
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import torch
 from common import after_first_objects
 from PIL import Image, ImageDraw
@@ -40,6 +46,14 @@ from reconphys.pipeline.search import observables
 from reconphys.threads import set_cpu_threads
 
 NAMES = ("log k/m", "log d/m", "friction")
+LAUNCHES = ("drop", "toss", "all")
+ASPECT_BINS = (1.0, 2.5, 4.0, math.inf)  # edges of --by-aspect's bins
+
+
+def elongation(anchors: np.ndarray) -> float:
+    """Spread of ``anchors`` [N, 3] along their longest principal axis / along their shortest."""
+    spread = np.sqrt(np.linalg.eigvalsh(np.cov((anchors - anchors.mean(0)).T)).clip(1e-12))
+    return float(spread[-1] / spread[0])
 
 
 def observables_of(attributes: dict) -> torch.Tensor:  # [3] log k/m, log d/m, f (float64)
@@ -74,6 +88,9 @@ def main() -> None:
         "(by mesh), e.g. a validation split of meshes a model of several folders never saw",
     )
     parser.add_argument(
+        "--by-aspect", action="store_true", help="ratios by the objects' elongation as well"
+    )
+    parser.add_argument(
         "--trivial-from",
         type=Path,
         default=None,
@@ -89,6 +106,11 @@ def main() -> None:
         meta = json.loads((args.data / s["dir"] / "sample.json").read_text())
         launch = meta["initial_state"].get("launch", "drop")
         truth_of[s["id"]] = (observables_of(meta["attributes"]), launch)
+    aspect_of = {}  # object id → elongation of its anchors (--by-aspect)
+    if args.by_aspect:
+        for o in manifest["objects"]:
+            with np.load(args.data / o["dir"] / "anchors.npz") as stored:
+                aspect_of[o["id"]] = elongation(stored["x0"])
     source = args.trivial_from or args.data
     trivial_truth = {s["id"]: truth_of[s["id"]][0] for s in train}
     if args.trivial_from is not None:  # its sample ids may be DATA's too (another seed)
@@ -127,21 +149,27 @@ def main() -> None:
             out = predictor.predict(frames[None])
             predicted = observables_of({k: out[k][0] for k in ATTRIBUTES})
             true, launch = truth_of[item["id"]]
-            rows.append((predicted, true, launch))
+            rows.append((predicted, true, launch, aspect_of.get(dataset.samples[index]["object"])))
         seconds = (time.perf_counter() - started) / max(len(rows), 1)
         videos = predictor.metadata.get("training", {}).get("data", {}).get("samples", 0)
         print(f"{model or 'shipped'} ({videos} training videos; {seconds * 1e3:.0f} ms / video)")
         curve.append((videos, {}))
-        for kind in ("drop", "toss", "all"):
-            chosen = [r for r in rows if kind == "all" or r[2] == kind]
+        groups = [(kind, [r for r in rows if kind == "all" or r[2] == kind]) for kind in LAUNCHES]
+        if args.by_aspect:
+            edges = itertools.pairwise(ASPECT_BINS)
+            groups += [
+                (f"{lo:g}-{hi:g}:1", [r for r in rows if lo <= r[3] < hi]) for lo, hi in edges
+            ]
+        for kind, chosen in groups:
             if not chosen:
                 continue
             predicted = torch.stack([r[0] for r in chosen])
             true = torch.stack([r[1] for r in chosen])
             ratio = (median - true).abs().mean(0) / (predicted - true).abs().mean(0)
-            curve[-1][1][kind] = ratio.tolist()
+            if kind in LAUNCHES:
+                curve[-1][1][kind] = ratio.tolist()
             cells = " / ".join(f"{v:.2f}×" for v in ratio.tolist())
-            print(f"  {kind:5} n={len(chosen):3}: {cells}  ({' / '.join(NAMES)})")
+            print(f"  {kind:7} n={len(chosen):3}: {cells}  ({' / '.join(NAMES)})")
     if args.curve:
         plot_curve(sorted(curve, key=lambda c: c[0]), args.curve, str(args.data))
 

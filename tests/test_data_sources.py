@@ -107,6 +107,63 @@ def test_folder_source_lists_meshes_and_gaussian_plys(mesh_folder):
     assert splat.num_gaussians == 200
 
 
+def test_stretch_makes_an_ellipsoid_of_a_sphere(tmp_path):
+    """--stretch: a sphere mesh stretched by s along an axis u is an ellipsoid whose extent along
+    u is s times its extent across (analytic); drawn from the object id and the dataset seed."""
+    from reconphys.data.source_base import load_file_object, mesh_stretch
+
+    path = tmp_path / "ball.glb"
+    _coloured_sphere().export(path)
+    settings = make_settings(num_gaussians=2000, stretch_range=(2.0, 4.0), seed=5)
+    assert mesh_stretch("ball.glb", make_settings()) is None
+    stretch = mesh_stretch("ball.glb", settings)
+    assert np.allclose(stretch, mesh_stretch("ball.glb", settings))  # the same for the same id
+    other_seed = make_settings(stretch_range=(2.0, 4.0), seed=6)
+    assert not np.allclose(stretch, mesh_stretch("ball.glb", other_seed))
+    values, vectors = np.linalg.eigh(stretch)
+    assert np.allclose(values[:2], 1.0) and 2.0 <= values[2] <= 4.0
+    axis = torch.from_numpy(vectors[:, 2]).float()
+    across = torch.from_numpy(vectors[:, 0]).float()
+    g = load_file_object(path, "ball.glb", settings).means  # [N, 3], largest side settings.size
+    along = g @ axis
+    side = g @ across
+    ratio = (along.max() - along.min()) / (side.max() - side.min())
+    assert ratio.item() == pytest.approx(values[2], rel=0.04)
+    plain = load_file_object(path, "ball.glb", make_settings(num_gaussians=2000)).means
+    spread = plain.std(0)
+    assert (spread.max() / spread.min()).item() < 1.1  # unstretched: still a sphere
+    splat = tmp_path / "splat.ply"
+    write_ply(splat, make_procedural_gaussians("torus", 100, seed=1))
+    with pytest.raises(InputError, match="Gaussian PLY cannot be stretched"):
+        load_file_object(splat, "splat.ply", settings)
+    with pytest.raises(InputError, match="--stretch"):
+        open_source("procedural", settings)
+    with pytest.raises(InputError, match="--stretch"):
+        make_settings(stretch_range=(0.5, 2.0))
+    out = tmp_path / "d"
+    result = runner.invoke(app, ["make-data", "--source", str(tmp_path), "--stretch", "0.5",
+                                 "--out", str(out)])  # fmt: skip
+    _assert_one_line_error(result, "--stretch", "1 ≤ low ≤ high")
+    assert not out.exists()
+
+
+def test_stretch_leaves_older_datasets_fingerprints_alone():
+    """A dataset made before --stretch existed keeps its fingerprint (resumes and more_sources
+    checks compare them); asking for a stretch changes it."""
+    import hashlib
+
+    settings = make_settings()
+    values = settings.to_dict()
+    values.pop("stretch_range")
+    for name in ("scene", "object_size_range", "fov_range_deg", "elevation_range_deg"):
+        values.pop(name)
+    for name in ("framing_range", "noise_range", "video_quality_range"):
+        values.pop(name)
+    text = json.dumps(values, sort_keys=True)
+    assert settings.fingerprint() == hashlib.sha256(text.encode()).hexdigest()[:16]
+    assert make_settings(stretch_range=(1.0, 3.0)).fingerprint() != settings.fingerprint()
+
+
 def test_pybullet_source():
     pytest.importorskip("pybullet_data")
     source = open_source("pybullet")

@@ -39,6 +39,7 @@ SETTINGS_OPTIONS = {
     "toss_fraction": "toss_fraction",
     "scene": "scene",
     "objaverse_uids": "objaverse_uids",
+    "stretch": "stretch_range",
 }
 
 
@@ -77,6 +78,11 @@ def make_data(
         "ground, backdrop, light and contact shadow, a camera per sample, objects 0.1–0.6 m, "
         "sensor noise, H.264 compression; true masks stored as masks.npz).",
     ),
+    stretch: float = typer.Option(
+        None,
+        help="Stretch each mesh along a random axis by up to this factor (log-uniform from 1; "
+        "default 1: as the file is), so compact meshes also give long, thin objects.",
+    ),
     seed: int = typer.Option(0, help="Dataset seed: object selection, splits, all samples."),
     workers: int = typer.Option(
         0, help="Worker processes (0: one per CPU core, one with --device cuda)."
@@ -108,6 +114,8 @@ def make_data(
         for option, field in SETTINGS_OPTIONS.items()
         if config is None or option in given
     }
+    if values.get("stretch_range") is not None:
+        values["stretch_range"] = (1.0, float(values["stretch_range"]))
     if values.get("objaverse_uids"):
         values["objaverse_uids"] = str(values["objaverse_uids"])
     settings = make_settings(preset, config, **values)

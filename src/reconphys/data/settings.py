@@ -19,6 +19,7 @@ from ..errors import InputError
 from ..physics import ATTRIBUTE_RANGES
 
 DISTRIBUTIONS = ("uniform", "log-uniform")
+MAX_STRETCH = 20.0  # of a mesh along one axis (stretch_range)
 SCENES = ("plain", "realistic")
 SCENE_FIELDS = (
     "scene",
@@ -70,6 +71,10 @@ class DataSettings:
     camera_elevation_deg: float = 15.0
     camera_target: tuple[float, float, float] = (0.0, 0.0, 0.3)  # metres
     objaverse_uids: str = ""  # optional file of Objaverse UIDs (one a line) to draw from
+    # Mesh files stretched along a random axis by a factor drawn log-uniformly from this range
+    # before normalisation (data/source_base.py), so that a source of compact meshes also gives
+    # long, thin objects; (1, 1): each mesh as its file has it.
+    stretch_range: tuple[float, float] = (1.0, 1.0)
     # The look (docs/design.md#synthetic-dataset): "plain" (object on black, the cameras above) or
     # "realistic" (data/scene.py: ground, backdrop, light and shadow, a camera per sample framed
     # on the motion, sized objects, noise, compression; the fields below apply to it only).
@@ -102,8 +107,15 @@ class DataSettings:
         if self.scene == "plain":
             for name in SCENE_FIELDS:
                 values.pop(name)
+        if not self.stretched:  # datasets made before the stretch existed keep theirs
+            values.pop("stretch_range")
         text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    @property
+    def stretched(self) -> bool:
+        """True when mesh files are stretched (``stretch_range`` above 1)."""
+        return max(self.stretch_range) > 1.0
 
     def require_plain(self, source: str, what: str, instead: str) -> None:
         """Refuse a realistic-look dataset where ``what`` reads object-on-black frames only."""
@@ -191,6 +203,11 @@ class DataSettings:
             raise InputError(
                 f"[{first}, {last}] must lie inside (0, {self.num_frames - 1})",
                 field="contact_frame_range",
+            )
+        low, high = self.stretch_range
+        if not (1.0 <= low <= high <= MAX_STRETCH):
+            raise InputError(
+                f"[{low}, {high}] must satisfy 1 ≤ low ≤ high ≤ {MAX_STRETCH:g}", field="--stretch"
             )
         low, high = self.drop_height_range
         if not (0 < low <= high):

@@ -124,6 +124,11 @@ def open_source(
 ):
     """The source named by ``spec``: "procedural", "pybullet", "objaverse" or a folder path."""
     if spec == "procedural":
+        if settings is not None and settings.stretched:
+            raise InputError(
+                "procedural shapes have their own proportions; --stretch applies to mesh files",
+                field="--stretch",
+            )
         return ProceduralSource()
     if spec == "pybullet":
         return PybulletSource()

@@ -88,9 +88,17 @@ def generate_settings(config: DataConfig) -> DataSettings:
 
 
 # settings in which data.more_sources may differ from data.source (what else differs would change
-# what a video shows); a model of object crops reads every folder resampled to its crop, so for it
-# the recordings' resolution is free too (several resolutions: the look of small and large objects)
-FREE_KEYS = ("seed", "objects", "test_objects", "samples_per_object", "test_samples_per_object")
+# what a video shows); the meshes' stretch is free (other proportions of the same objects); a model
+# of object crops reads every folder resampled to its crop, so for it the recordings' resolution is
+# free too (several resolutions: the look of small and large objects)
+FREE_KEYS = (
+    "seed",
+    "objects",
+    "test_objects",
+    "samples_per_object",
+    "test_samples_per_object",
+    "stretch_range",
+)
 CROP_FREE_KEYS = (*FREE_KEYS, "resolution")
 
 
@@ -248,7 +256,7 @@ class TrainingSamples(Dataset):
                 differ = sorted(k for k in same if theirs.get(k) != same[k])
                 raise InputError(
                     f"made with other settings than data.source ({', '.join(differ)}): only "
-                    "the seed and the counts of objects and samples may differ"
+                    "the seed, the stretch and the counts of objects and samples may differ"
                     + ("" if self.crop else " (and the resolution, for a model of object crops)"),
                     source=folder,
                     field="data.more_sources",
