@@ -86,7 +86,7 @@ def load_file_object(path: Path, object_id: str, settings: DataSettings) -> Gaus
         return normalize_gaussians(g, settings.size)
     if stretch is None:
         return mesh_to_gaussians(path, settings.num_gaussians, seed=seed, size=settings.size)
-    mesh = load_mesh(path).copy()
+    mesh = load_mesh(path)  # a fresh mesh per call: transformed in place
     transform = np.eye(4)
     transform[:3, :3] = stretch
     mesh.apply_transform(transform)  # keeps the mesh's colours and texture coordinates
