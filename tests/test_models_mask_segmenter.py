@@ -168,9 +168,10 @@ def test_train_masks_writes_a_loadable_model_and_refuses_plain_data(tmp_path):
     out = tmp_path / "run"
     command = ["train-masks", "--data", str(data), "--out", str(out), "--steps", "3"]
     command += ["--batch-size", "2", "--crop", "16", "--threads", "1", "--no-progress"]
-    result = runner.invoke(app, [*command, "--zoom", "0.5", "0.5"])
+    result = runner.invoke(app, [*command, "--zoom", "0.5", "0.5", "--channels", "8,12,16"])
     assert result.exit_code == 0, result.output
     model = load_mask_segmenter(out)
+    assert model.config.channels == (8, 12, 16) and model.stride == 4  # the width given
     assert model(torch.zeros(1, 16, 24, 24)).shape == (1, 24, 24)
     lines = (out / "log.jsonl").read_text().splitlines()
     assert [json.loads(line)["step"] for line in lines] == [1, 2, 3]
@@ -181,6 +182,9 @@ def test_train_masks_writes_a_loadable_model_and_refuses_plain_data(tmp_path):
     assert result.exit_code != 0 and "stores no masks" in result.output
     result = runner.invoke(app, [*command, "--zoom", "1.5", "0.8"])
     assert result.exit_code != 0 and "--zoom" in result.output
+    for channels in ("8,13", "16", "a,b"):
+        result = runner.invoke(app, [*command, "--channels", channels])
+        assert result.exit_code != 0 and "--channels" in result.output
 
 
 def test_load_clips_reads_some_views_and_leaves_held_out_meshes_out(tmp_path):

@@ -87,6 +87,8 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     assert summary["model"].endswith("physics_predictor.safetensors")
     assert "plain look" in summary["model_choice"]
     assert "physics network: " in result.output and "(the plain look" in result.output
+    motion = summary["initial_velocity"]
+    assert motion["released_from_rest"] == (not any(motion["linear_m_s"]))
     steps = ("decode", "gaussians", "physics_network", "asset_build", "search", "write", "preview")
     for step in steps:
         assert summary["timings_s"][step] >= 0
@@ -394,6 +396,26 @@ def test_velocity_along_the_view_is_read_from_the_growing_mask(dataset):
     masks, camera = _rendered_fall(gaussians, torch.zeros(3), size=128, frames=5)
     estimate = linear_velocity_fit(gaussians.means, masks, camera, 0.03, frames=5)[0]
     assert float(estimate.norm()) < 0.1, estimate
+
+
+def test_a_release_from_rest_comes_back_at_rest_and_a_slow_toss_does_not(dataset, monkeypatch):
+    """The rest test (placement.REST_CHI2): a drop from rest is read as exactly at rest, where
+    the fit alone reads a few cm/s of mask noise as motion; a toss of 0.3 m/s sideways is
+    motion the masks show, and keeps its velocity."""
+    from reconphys.capture import placement
+    from reconphys.data.dataset import DropDataset
+
+    gaussians = DropDataset(dataset).asset(0).gaussians
+    masks, camera = _rendered_fall(gaussians, torch.zeros(3))
+    assert torch.equal(linear_velocity_fit(gaussians.means, masks, camera, 0.03)[0], torch.zeros(3))
+    with monkeypatch.context() as patch:
+        patch.setattr(placement, "REST_CHI2", 0.0)
+        free = linear_velocity_fit(gaussians.means, masks, camera, 0.03)[0]
+    assert 0 < float(free.norm()) < 0.1
+    sideways = torch.tensor([0.0, 0.3, 0.0])  # across view 0, which looks along −x
+    masks, camera = _rendered_fall(gaussians, sideways)
+    fitted = linear_velocity_fit(gaussians.means, masks, camera, 0.03)[0]
+    assert abs(float(fitted[1]) - 0.3) < 0.1 and abs(float(fitted[2])) < 0.1
 
 
 def test_refine_lowers_the_photometric_loss(dataset, sample_id):

@@ -147,6 +147,9 @@ def train_masks(
         "(configs/masks_held_out.txt); repeat.",
     ),
     views_per_sample: int = typer.Option(4, help="Views of each sample read (1–4): less memory."),
+    channels: str = typer.Option(
+        "24,32,48,64", help="The U-Net's channels per level, comma-separated (multiples of 4)."
+    ),
     threads: int = typer.Option(2, help="CPU threads (torch)."),
     no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
 ):
@@ -163,6 +166,15 @@ def train_masks(
         raise InputError(f"must be a positive number, got {lr}", field="--lr")
     if not (all(math.isfinite(z) and z > 0 for z in zoom) and zoom[0] <= zoom[1]):
         raise InputError(f"must be 0 < LO ≤ HI, got {zoom[0]} {zoom[1]}", field="--zoom")
+    try:
+        widths = tuple(int(c) for c in channels.split(","))
+    except ValueError:
+        widths = ()
+    if len(widths) < 2 or any(c < 4 or c % 4 for c in widths):
+        raise InputError(
+            f"must be two or more multiples of 4, comma-separated, got {channels!r}",
+            field="--channels",
+        )
     for folder in data:
         if not folder.is_dir():
             raise InputError("dataset folder not found", source=str(folder))
@@ -180,6 +192,7 @@ def train_masks(
         zoom=zoom,
         exclude=tuple(str(d) for d in exclude),
         views_per_sample=views_per_sample,
+        channels=widths,
     )
     set_cpu_threads(threads)
     path = train_mask_segmenter(settings, progress=not no_progress, log=typer.echo)

@@ -370,8 +370,11 @@ def predict_observation(
             # the size's when the camera is read from the video)
             "linear_sd_camera_axes_m_s": [round(float(x), 4) for x in error],
             "angular_rad_s": [0.0, 0.0, 0.0],
+            # the masks' motion is explained without a velocity (placement.REST_CHI2)
+            "released_from_rest": not bool(velocity.any()),
             "how": "free fall of the mask's centroid and growth of its area over frames 0–3 "
-            "(angular velocity not estimated)",
+            "(angular velocity not estimated)"
+            + ("; at rest: no motion beyond the masks' noise" if not velocity.any() else ""),
         }
     means = placed.means if build_new else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)

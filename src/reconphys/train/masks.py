@@ -31,6 +31,7 @@ from ..errors import InputError
 from ..io import atomic_file
 from ..models.mask_segmenter import (
     MaskSegmenter,
+    SegmenterConfig,
     clip_references,
     frame_inputs,
     load_mask_segmenter,
@@ -56,6 +57,7 @@ class MaskTrainSettings:
     zoom: tuple[float, float] = (1.0, 1.0)  # per step, log-uniform: frames resampled by it
     exclude: tuple[str, ...] = ()  # meshes left out: a folder's test split's, or a list file
     views_per_sample: int = 4  # sample i gives views i, i + 1, … (mod 4): more meshes per GB
+    channels: tuple[int, ...] = SegmenterConfig().channels  # the U-Net's width per level
 
 
 @dataclass
@@ -160,7 +162,7 @@ def train_mask_segmenter(settings: MaskTrainSettings, progress: bool = True, log
         settings.data, "train", progress, settings.exclude, settings.views_per_sample
     )
     torch.manual_seed(settings.seed)
-    model = MaskSegmenter()
+    model = MaskSegmenter(SegmenterConfig(channels=tuple(settings.channels)))
     optimizer = torch.optim.AdamW(model.parameters(), lr=settings.lr, weight_decay=1e-4)
     checkpoint = out / CHECKPOINT
     first = resume_step(checkpoint, model, optimizer, asdict(settings), log)
