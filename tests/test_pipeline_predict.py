@@ -418,6 +418,27 @@ def test_a_release_from_rest_comes_back_at_rest_and_a_slow_toss_does_not(dataset
     assert abs(float(fitted[1]) - 0.3) < 0.1 and abs(float(fitted[2])) < 0.1
 
 
+def test_a_release_from_rest_placed_at_the_wrong_depth_still_comes_back_at_rest(
+    dataset, monkeypatch
+):
+    """A camera read from the video (or a predicted shape) puts the centre at another depth than
+    the fall's pixels imply; a fall from rest then looks like one with a velocity unless the rest
+    hypothesis may move the centre along its ray (placement.REST_DEPTH_FACTORS)."""
+    from reconphys.capture import placement
+    from reconphys.data.dataset import DropDataset
+
+    gaussians = DropDataset(dataset).asset(0).gaussians
+    masks, camera = _rendered_fall(gaussians, torch.zeros(3), size=256)
+    w2c = camera.world_to_cam.float()
+    eye = -(w2c[:3, :3].T @ w2c[:3, 3])
+    farther = eye + 1.4 * (gaussians.means - eye)  # 40 % too far, on the same rays
+    assert torch.equal(linear_velocity_fit(farther, masks, camera, 0.03)[0], torch.zeros(3))
+    with monkeypatch.context() as patch:
+        patch.setattr(placement, "REST_DEPTH_FACTORS", (1.0, 1.0))
+        fixed = linear_velocity_fit(farther, masks, camera, 0.03)[0]
+    assert float(fixed.norm()) > 0.1
+
+
 def test_refine_lowers_the_photometric_loss(dataset, sample_id):
     from dataclasses import replace
 
