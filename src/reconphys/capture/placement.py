@@ -66,6 +66,12 @@ def project(points: Tensor, camera: CameraSpec) -> tuple[Tensor, Tensor]:
     return uv * torch.stack([K[0, 0], K[1, 1]]) + torch.stack([K[0, 2], K[1, 2]]), depth
 
 
+def camera_centre(camera: CameraSpec) -> Tensor:  # [3] world frame, float64
+    """Where the camera is: −Rᵀ t of its world_to_cam."""
+    w2c = camera.world_to_cam.double()
+    return -w2c[:3, :3].T @ w2c[:3, 3]
+
+
 def ray(pixel: Tensor, camera: CameraSpec) -> tuple[Tensor, Tensor]:
     """Pixel [2] → (camera centre [3], unit direction [3]) in the world frame."""
     K = camera.K.double()
@@ -77,10 +83,8 @@ def ray(pixel: Tensor, camera: CameraSpec) -> tuple[Tensor, Tensor]:
             torch.tensor(1.0, dtype=torch.float64),
         ]
     )
-    rotation = w2c[:3, :3]
-    centre = -rotation.T @ w2c[:3, 3]
-    direction = rotation.T @ direction_cam
-    return centre, direction / direction.norm()
+    direction = w2c[:3, :3].T @ direction_cam
+    return camera_centre(camera), direction / direction.norm()
 
 
 def _box(u: Tensor, v: Tensor) -> Tensor:
@@ -238,8 +242,7 @@ def linear_velocity_fit(
     pixels = r[:-3]  # the centroid's and the size's residuals (the last 3: the prior)
     noise = max(float((pixels**2).sum()) / max(len(pixels) - 3, 1), VELOCITY_NOISE_PX**2)
     covariance = noise * torch.linalg.inv(J.T @ J)  # [3, 3] world axes, (m/s)²
-    w2c = camera.world_to_cam.double()
-    eye = -(w2c[:3, :3].T @ w2c[:3, 3])  # the camera's centre, world frame
+    eye = camera_centre(camera)
 
     def at_rest(factor: float) -> float:  # the pixels' sum of squares, at rest at factor × depth
         centres = eye + factor * (points.mean(0) - eye) + fall  # [F, 3]: the same ray at frame 0

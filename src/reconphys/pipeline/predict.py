@@ -364,6 +364,7 @@ def predict_observation(
             spread = math.log(estimate["size_factor_10_90"][1]) / Z_10_90
             across = observation.camera.world_to_cam[:3, :3].to(velocity) @ velocity
             error = (error**2 + (spread * across) ** 2).sqrt()
+        at_rest = not bool(velocity.any())
         details["initial_velocity"] = {
             "linear_m_s": [round(float(x), 4) for x in velocity],
             # its standard error along the camera's x (right), y (down) and viewing axes (with
@@ -371,10 +372,10 @@ def predict_observation(
             "linear_sd_camera_axes_m_s": [round(float(x), 4) for x in error],
             "angular_rad_s": [0.0, 0.0, 0.0],
             # the masks' motion is explained without a velocity (placement.REST_CHI2)
-            "released_from_rest": not bool(velocity.any()),
+            "released_from_rest": at_rest,
             "how": "free fall of the mask's centroid and growth of its area over frames 0–3 "
             "(angular velocity not estimated)"
-            + ("; at rest: no motion beyond the masks' noise" if not velocity.any() else ""),
+            + ("; at rest: no motion beyond the masks' noise" if at_rest else ""),
         }
     means = placed.means if build_new else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)
