@@ -106,3 +106,33 @@ def predict_bundle(bundle: Path, **options):
         gaussians=bundle / "gaussians.ply",
         **options,
     )
+
+
+def camera_read_errors(estimate, K_true, w2c_true, centre, lowest) -> dict:
+    """Errors of a camera read from the video (capture.calibrate's CameraEstimate) against the
+    true one (K [3, 3], world_to_cam [4, 4]), for an object whose frame-0 centre and lowest
+    point (world, metres [3]) are known: scale error = the object's metric size read / the
+    truth − 1 (size = pixels · distance / f); ground error = the height above the estimated
+    ground of the true lowest point at its pixel and the depth the estimate gives the object,
+    minus the true height (metres): what decides when the simulated object lands."""
+    K_true, w2c_true = K_true.double(), w2c_true.double()
+    centre, lowest = centre.double(), lowest.double()
+    true_distance = float((w2c_true[:3, :3] @ centre + w2c_true[:3, 3]).norm())
+    f_true, f_est = float(K_true[1, 1]), float(estimate.camera.K[1, 1])
+    scale = (estimate.distance / f_est) / (true_distance / f_true)
+    cam = w2c_true[:3, :3] @ lowest + w2c_true[:3, 3]
+    pixel = (K_true @ cam)[:2] / cam[2]
+    depth = float(cam[2]) * estimate.distance / true_distance
+    K_est = estimate.camera.K.double()
+    ray = torch.stack(
+        [(pixel[0] - K_est[0, 2]) / K_est[0, 0], (pixel[1] - K_est[1, 2]) / K_est[1, 1]]
+    )
+    point_cam = depth * torch.cat([ray, torch.ones(1, dtype=torch.float64)])
+    w2c = estimate.camera.world_to_cam.double()
+    point_world = w2c[:3, :3].T @ (point_cam - w2c[:3, 3])
+    return {
+        "scale_error": scale - 1,
+        "ground_error_m": float(point_world[2]) - float(lowest[2]),
+        "pitch_deg": estimate.pitch_deg,
+        "fall_frames": estimate.fall_frames,
+    }

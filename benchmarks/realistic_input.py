@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 import torch
-from common import mean_mask_iou
+from common import camera_read_errors, mean_mask_iou
 
 from reconphys.capture.calibrate import (
     DEFAULT_FOV_DEG,
@@ -44,30 +44,14 @@ from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, segme
 
 
 def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True) -> dict:
-    K_true = item["K"][0].double()
-    w2c_true = item["world_to_cam"][0].double()
     anchors = item["anchors"].double()  # [T, N_A, 3]
     estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg, fit_px, touch)
-    centre_cam = w2c_true[:3, :3] @ anchors[0].mean(0) + w2c_true[:3, 3]
-    true_distance = float(centre_cam.norm())
-    f_true, f_est = float(K_true[1, 1]), float(estimate.camera.K[1, 1])
-    scale = (estimate.distance / f_est) / (true_distance / f_true)
     lowest = anchors[0][anchors[0][:, 2].argmin()]  # frame 0's lowest point: the drop height
-    cam = w2c_true[:3, :3] @ lowest + w2c_true[:3, 3]
-    pixel = (K_true @ cam)[:2] / cam[2]
-    depth = float(cam[2]) * estimate.distance / true_distance
-    K_est = estimate.camera.K.double()
-    ray = torch.stack(
-        [(pixel[0] - K_est[0, 2]) / K_est[0, 0], (pixel[1] - K_est[1, 2]) / K_est[1, 1]]
+    errors = camera_read_errors(
+        estimate, item["K"][0], item["world_to_cam"][0], anchors[0].mean(0), lowest
     )
-    point_cam = depth * torch.cat([ray, torch.ones(1, dtype=torch.float64)])
-    w2c = estimate.camera.world_to_cam.double()
-    point_world = w2c[:3, :3].T @ (point_cam - w2c[:3, 3])
     return {
-        "scale_error": scale - 1,
-        "ground_error_m": float(point_world[2]) - float(lowest[2]),
-        "pitch_deg": estimate.pitch_deg,
-        "fall_frames": estimate.fall_frames,
+        **errors,
         "contact_s": estimate.contact_s,
         "size_factor_10_90": list(estimate.size_factor_10_90),  # true size / read: 10–90 %
     }

@@ -156,6 +156,21 @@ def test_a_wrong_focal_length_moves_the_camera_not_the_object():
     assert size_wrong == pytest.approx(size_right, rel=0.05)
 
 
+def test_masks_that_make_the_object_metres_across_are_refused():
+    """A fall read eight times slower than it was (as masks that do not follow the object can
+    read: a segmenter on a scene it does not know) puts a 0.2 m ball 64 times as far and as
+    large: more than MAX_READ_SIZE_M across, so refused with what to give instead; the same
+    masks at their own frame rate pass."""
+    from reconphys.capture.calibrate import MAX_READ_SIZE_M
+
+    masks, *_ = ball_masks(15.0, 2.0, 0.45, 0.1)
+    estimate = estimate_camera(masks, 0.03, fov_deg=45.0)  # at its own rate: passes
+    assert estimate.distance == pytest.approx(2.0, rel=0.1)
+    assert 0.2 * 64 > MAX_READ_SIZE_M > 10 * 0.2  # a ten times larger object would pass
+    with pytest.raises(InputError, match=r"m across.*--camera FILE"):
+        estimate_camera(masks, 8 * 0.03, fov_deg=45.0)
+
+
 def test_a_fall_too_short_to_show_the_scale_is_refused():
     masks, *_ = ball_masks(15.0, 2.0, 0.004, 0.1)  # released 4 mm above the ground
     with pytest.raises(InputError, match="--camera FILE"):

@@ -526,7 +526,53 @@ def test_plain_datasets_keep_their_fingerprint_and_scene_is_checked():
     assert make_settings().fingerprint() == "e3bbdc7d452e8abc"
     assert make_settings("paper").fingerprint() == "964335a7749f4cb7"
     assert make_settings(scene="realistic").fingerprint() != make_settings().fingerprint()
+    # nor realistic ones made before the vivid look (data/seg_pyb's settings: make masks-model)
+    seg_pyb = make_settings(
+        source="pybullet", scene="realistic", objects=60, test_objects=20, resolution=96, seed=3
+    )
+    assert seg_pyb.fingerprint() == "4f3f1fc529c326e3"
+    assert (
+        make_settings(scene="realistic", vivid_share=0.5).fingerprint()
+        != make_settings(scene="realistic").fingerprint()
+    )
+    with pytest.raises(InputError, match="--vivid-share"):
+        make_settings(scene="realistic", vivid_share=1.5)
     with pytest.raises(InputError, match="--scene"):
         make_settings(scene="studio")
     with pytest.raises(InputError, match="object_size_range"):
         make_settings(scene="realistic", object_size_range=(0.5, 0.1))
+
+
+def test_vivid_share_changes_only_the_look_and_the_asset_carries_its_print(tmp_path):
+    """--vivid-share draws from a stream of its own: the physics, the size and the camera of a
+    seed are those of the muted look, the scenes drawn vivid are about the share asked, and a
+    printed object's stored Gaussians carry the colours its video shows (the print on the same
+    points), so the asset and the frames agree."""
+    from reconphys.data.scene import draw_scene
+
+    muted = replace(SMALL, scene="realistic", resolution=32)
+    vivid = replace(muted, vivid_share=0.5)
+    ids = [f"object-{i}" for i in range(80)]
+    drawn = [(draw_scene(muted, i, 0), draw_scene(vivid, i, 0)) for i in ids]
+    changed = [a.look != b.look for a, b in drawn]
+    assert 0.3 < np.mean(changed) < 0.7
+    for a, b in drawn:
+        assert (a.size, a.fov_deg, a.elevation_deg, a.framing) == (
+            b.size,
+            b.fov_deg,
+            b.elevation_deg,
+            b.framing,
+        )
+    settings = replace(vivid, vivid_share=1.0, objects=1, test_objects=0)
+    make_dataset(settings, tmp_path / "vivid", workers=1, device="cpu")
+    dataset = DropDataset(tmp_path / "vivid")
+    looks = [dataset.meta(i)["scene"]["look"] for i in range(len(dataset))]
+    printed = [i for i, look in enumerate(looks) if look["object_pattern"] != "none"]
+    assert printed, "no sample drew a print"
+    index = printed[0]
+    canonical = dataset.object(index).gaussians.colors  # the object as the source gives it
+    stored = dataset.asset(index).gaussians.colors
+    assert float((stored - canonical).abs().max()) > 0.1
+    assert dataset[index]["attributes"].equal(
+        GeneratedDropDataset(replace(settings, vivid_share=0.0), device="cpu")[index]["attributes"]
+    )

@@ -694,3 +694,17 @@ def test_predicted_geometry_from_the_first_frame(bundle, dataset, sample_id, tmp
         "stored",
     )
     assert stored.exit_code == 0, stored.output
+
+
+def test_an_implausible_launch_is_refused_not_answered():
+    """A launch read faster than MAX_INITIAL_SPEED_M_S (a fall from 5 m lands at 10 m/s) is a
+    misread, not a toss: refused with one line naming the recording and what to give; a toss
+    at a few m/s and a drop from rest pass."""
+    from reconphys.pipeline.predict import MAX_INITIAL_SPEED_M_S, check_initial_speed
+
+    assert (2 * 9.81 * 5.0) ** 0.5 < MAX_INITIAL_SPEED_M_S + 0.1
+    check_initial_speed(torch.tensor([1.5, -0.5, 2.0]), "clip.mp4")
+    check_initial_speed(torch.zeros(3), "clip.mp4")
+    for bad in ([0.5, -14.7, -12.9], [float("nan"), 0.0, 0.0]):
+        with pytest.raises(InputError, match=r"clip\.mp4.*m/s.*--masks DIR"):
+            check_initial_speed(torch.tensor(bad), "clip.mp4")

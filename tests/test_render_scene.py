@@ -13,14 +13,17 @@ import torch
 from reconphys.assets.gaussians import Gaussians
 from reconphys.render import dataset_views
 from reconphys.render.scene import (
-    GROUND_PATTERNS,
+    OBJECT_PATTERNS,
+    VIVID_GROUND_PATTERNS,
     add_sensor_noise,
     composite_in_scene,
     draw_look,
     pixel_rays,
+    print_pattern,
     scene_background,
     shade_gaussians,
     shadow_cover,
+    vivid_look,
 )
 from reconphys.render.video import compress_video
 
@@ -66,7 +69,7 @@ def test_ground_hits_lie_on_their_pixels_and_the_sky_is_above_the_horizon():
     assert float(background.backdrop.min()) >= 0 and float(background.backdrop.max()) <= 1
 
 
-@pytest.mark.parametrize("pattern", GROUND_PATTERNS)
+@pytest.mark.parametrize("pattern", VIVID_GROUND_PATTERNS)
 def test_every_ground_pattern_is_textured(pattern):
     cameras = dataset_views(32, 32, elevation_deg=40.0, dtype=torch.float64)
     background = scene_background(cameras, look(ground_pattern=pattern, ground_period=0.2))
@@ -145,3 +148,47 @@ def test_compression_decodes_close_to_the_input_and_lower_quality_is_smaller():
         assert psnr > (35 if quality == 8 else 22)
         sizes[quality] = len(data)
     assert sizes[3.0] < sizes[8.0]
+
+
+def _chroma(rgb: torch.Tensor) -> torch.Tensor:  # [..., 3] → [...] max − min channel
+    return rgb.max(-1).values - rgb.min(-1).values
+
+
+def test_a_vivid_look_is_saturated_where_the_muted_one_never_is():
+    """The vivid look (data's vivid_share) draws floors far more colourful than the muted look
+    ever does (a tint of at most ±0.12 on a grey, the second colour a darker copy: a chroma
+    below 0.4), and keeps the light and the noise."""
+    rng = np.random.default_rng(1)
+    muted = [draw_look(rng, (0.0, 0.02)) for _ in range(200)]
+    vivid = [vivid_look(rng, m, 0.3) for m in muted]
+    floor = torch.tensor([c for m in muted for c in m.ground_colors])
+    assert float(_chroma(floor).max()) < 0.4
+    vivid_floor = [_chroma(torch.tensor(v.ground_colors)).max() for v in vivid]
+    assert np.mean([float(c) > 0.4 for c in vivid_floor]) > 0.6
+    assert {v.ground_pattern for v in vivid} == set(VIVID_GROUND_PATTERNS)
+    assert {v.object_pattern for v in vivid} == set(OBJECT_PATTERNS)
+    assert all(v.light_direction == m.light_direction for v, m in zip(vivid, muted, strict=True))
+    assert all(v.noise_sigma == m.noise_sigma for v, m in zip(vivid, muted, strict=True))
+
+
+@pytest.mark.parametrize("pattern", OBJECT_PATTERNS[1:])
+def test_a_printed_pattern_is_fixed_to_the_object(pattern):
+    """The print is a function of the object's own frame-0 points: moving the object leaves
+    every Gaussian's colour as it was, its colours come from the look's palette (mixed by
+    object_mix), and "none" leaves the colours alone."""
+    printed = look(
+        object_pattern=pattern,
+        object_colors=((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+        object_period=0.05,
+        object_mix=1.0,
+    )
+    points = torch.rand(500, 3, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    colours = torch.full((500, 3), 0.5, dtype=torch.float64)
+    a = print_pattern(colours, points, printed, torch.Generator().manual_seed(3))
+    b = print_pattern(colours, points + 2.0, printed, torch.Generator().manual_seed(3))
+    assert torch.equal(a, b)
+    palette = torch.tensor(printed.object_colors, dtype=torch.float64)
+    assert bool(((a[:, None, :] - palette[None]).abs().sum(-1).min(1).values < 1e-9).all())
+    assert len({tuple(c) for c in a.tolist()}) == 2  # both colours are used
+    none = print_pattern(colours, points, look(), torch.Generator().manual_seed(3))
+    assert torch.equal(none, colours)

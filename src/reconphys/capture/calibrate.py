@@ -72,6 +72,9 @@ CONTACT_MIN_G = 1.0
 SCALE_ERROR_FACTOR = 2.5
 SCALE_ERROR_FLOOR = 0.05
 Z_10_90 = NormalDist().inv_cdf(0.9)  # 1.2816
+# A fall read as an object this many metres across is not a fall: masks that do not follow the
+# object (a segmenter's on a scene it does not know) can imply one kilometres away
+MAX_READ_SIZE_M = 3.0
 
 
 @dataclass
@@ -314,6 +317,15 @@ def estimate_camera(
     pitch = float(params[6])
     down = np.array([0.0, math.cos(pitch), math.sin(pitch)])  # world down in the camera frame
     metres_per_px = float(params[2]) / f  # at the object's frame-0 depth
+    size = max(track.width[0], 2 * math.sqrt(track.area[0] / math.pi)) * metres_per_px
+    if not size <= MAX_READ_SIZE_M:
+        raise InputError(
+            f"the fall read from the masks makes the object {size:.3g} m across, "
+            f"{float(params[2]):.3g} m away (more than {MAX_READ_SIZE_M:g} m across): the masks "
+            "do not follow a falling object; give the camera with --camera FILE, or the masks "
+            "with --masks DIR",
+            source="camera from the video",
+        )
     contact = None
     if ground_from_touch:
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling

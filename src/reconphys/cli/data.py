@@ -40,6 +40,7 @@ SETTINGS_OPTIONS = {
     "scene": "scene",
     "objaverse_uids": "objaverse_uids",
     "stretch": "stretch_range",
+    "vivid_share": "vivid_share",
 }
 
 
@@ -77,6 +78,11 @@ def make_data(
         help="plain (the object on black, fixed cameras: the default) or realistic (a textured "
         "ground, backdrop, light and contact shadow, a camera per sample, objects 0.1–0.6 m, "
         "sensor noise, H.264 compression; true masks stored as masks.npz).",
+    ),
+    vivid_share: float = typer.Option(
+        None,
+        help="Realistic look only: the share of scenes drawn vivid (saturated many-coloured "
+        "floors and backdrops, a printed pattern on the object; default 0).",
     ),
     stretch: float = typer.Option(
         None,

@@ -37,6 +37,7 @@ from .generate import generate_sample
 from .objects import CanonicalObject, Placement, build_object, sample_asset, scale_object
 from .plan import plan_objects, plan_samples
 from .sampling import SampleSpec
+from .scene import look_from_dict, printed_object
 from .settings import DataSettings
 from .sources import open_source
 from .storage import read_manifest, read_object, read_sample_meta, sample_is_complete
@@ -232,6 +233,8 @@ class DropDataset(Dataset, _Selection):
         )
         placement = Placement(spec.rotation, np.array(state["translation"]), state["drop_height"])
         obj = scale_object(self.object(index), float(state.get("scale", 1.0)))
+        if "scene" in meta:  # the realistic look: its print, if any (data/scene.py)
+            obj = printed_object(obj, look_from_dict(meta["scene"]["look"]))
         return sample_asset(obj, spec, placement, self.settings)
 
     def masks(self, index: int, kind: str = "true") -> torch.Tensor:  # [V, T, H, W] bool

@@ -24,7 +24,7 @@ from ..render.scene import (
 from ..render.video import compress_video, to_uint8
 from .objects import CanonicalObject, Placement, place, sample_asset, scale_object
 from .sampling import SampleSpec, contact_frame, draw_sample
-from .scene import SceneSpec, draw_scene, framed_cameras
+from .scene import SceneSpec, draw_scene, framed_cameras, printed_object
 from .settings import DataSettings
 
 AZIMUTHS_DEG = (0.0, 90.0, 180.0, 270.0)
@@ -132,8 +132,9 @@ def generate_sample(
     device: torch.device | str = "cpu",
 ) -> GeneratedSample:
     spec = draw_sample(settings, obj.id, sample_index)
-    if settings.scene == "realistic":  # the object at the sample's size
-        obj = scale_object(obj, draw_scene(settings, obj.id, sample_index).size / settings.size)
+    if settings.scene == "realistic":  # the object at the sample's size, with its print
+        drawn = draw_scene(settings, obj.id, sample_index)
+        obj = printed_object(scale_object(obj, drawn.size / settings.size), drawn.look)
     placement = place(obj, spec)
     asset = sample_asset(obj, spec, placement, settings)
     trajectory = asset.simulate(settings.num_frames - 1, torch.device(device))

@@ -11,18 +11,21 @@ and sit 90° apart around the centre of the motion, as in the plain look.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import torch
 
+from ..assets.gaussians import SH_C0
 from ..render import Cameras, intrinsics_from_fov, look_at
-from ..render.scene import SceneLook, draw_look
+from ..render.scene import SceneLook, draw_look, print_pattern, vivid_look
+from .objects import CanonicalObject
 from .sampling import sample_seed
 from .settings import DataSettings
 
 MIN_CAMERA_HEIGHT = 0.05  # metres above the ground
 SCENE_STREAM = 1  # the realistic look's random stream, beside the sample's own (0)
+VIVID_STREAM = 2  # whether and how a scene is vivid (settings.vivid_share): a stream of its own
 
 
 @dataclass(frozen=True)
@@ -47,9 +50,15 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
     """The look of sample ``sample_index`` of ``object_id`` (a stream apart from its physics)."""
     seed = sample_seed(settings.seed, object_id, sample_index)
     rng = np.random.default_rng([seed, SCENE_STREAM])
+    size = float(rng.uniform(*settings.object_size_range))
+    look = draw_look(rng, settings.noise_range)
+    if settings.vivid_share > 0:
+        vivid = np.random.default_rng([seed, VIVID_STREAM])
+        if vivid.random() < settings.vivid_share:
+            look = vivid_look(vivid, look, size)
     return SceneSpec(
-        size=float(rng.uniform(*settings.object_size_range)),
-        look=draw_look(rng, settings.noise_range),
+        size=size,
+        look=look,
         fov_deg=float(rng.uniform(*settings.fov_range_deg)),
         elevation_deg=float(rng.uniform(*settings.elevation_range_deg)),
         azimuth_deg=float(rng.uniform(0.0, 360.0)),
@@ -58,6 +67,26 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         video_quality=float(rng.uniform(*settings.video_quality_range)),
         noise_seed=int(rng.integers(0, 2**31 - 1)),
     )
+
+
+def look_from_dict(data: dict) -> SceneLook:
+    """A sample's stored look (``meta["scene"]["look"]``) → SceneLook (lists back to tuples)."""
+
+    def tuples(value):
+        return tuple(tuples(v) for v in value) if isinstance(value, list) else value
+
+    return SceneLook(**{k: tuples(v) for k, v in data.items()})
+
+
+def printed_object(obj: CanonicalObject, look: SceneLook) -> CanonicalObject:
+    """``obj`` with ``look``'s pattern printed on its Gaussians (the vivid look; else as it is):
+    the sample's asset carries the colours its video shows."""
+    if look.object_pattern == "none":
+        return obj
+    g = obj.gaussians
+    generator = torch.Generator().manual_seed(look.texture_seed + 1)
+    colours = print_pattern(g.colors.double(), g.means.double(), look, generator)
+    return replace(obj, gaussians=replace(g, sh0=((colours - 0.5) / SH_C0).to(g.sh0.dtype)))
 
 
 def framed_cameras(

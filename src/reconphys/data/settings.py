@@ -29,6 +29,7 @@ SCENE_FIELDS = (
     "framing_range",
     "noise_range",
     "video_quality_range",
+    "vivid_share",
 )
 
 
@@ -85,6 +86,10 @@ class DataSettings:
     framing_range: tuple[float, float] = (0.45, 0.85)  # share of the image the motion spans
     noise_range: tuple[float, float] = (0.0, 0.02)  # sensor noise σ, colour units in [0, 1]
     video_quality_range: tuple[float, float] = (4.0, 8.0)  # H.264 quality 0–10 (CRF 31 to 10)
+    # Share of realistic scenes drawn vivid (render/scene.py vivid_look: saturated many-coloured
+    # floors and backdrops, a printed pattern on the object), from a random stream of its own:
+    # at 0 every scene is drawn as before
+    vivid_share: float = 0.0
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -109,6 +114,8 @@ class DataSettings:
                 values.pop(name)
         if not self.stretched:  # datasets made before the stretch existed keep theirs
             values.pop("stretch_range")
+        if self.scene != "plain" and not self.vivid_share:  # nor before the vivid look
+            values.pop("vivid_share")
         text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -198,6 +205,8 @@ class DataSettings:
                 raise InputError(
                     f"[{low}, {high}] must satisfy {lowest} ≤ low ≤ high ≤ {highest}", field=name
                 )
+        if not (isinstance(self.vivid_share, (int, float)) and 0 <= self.vivid_share <= 1):
+            raise InputError(f"must be in [0, 1], got {self.vivid_share!r}", field="--vivid-share")
         first, last = self.contact_frame_range
         if not (0 < first <= last < self.num_frames - 1):
             raise InputError(

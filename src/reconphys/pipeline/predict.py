@@ -127,6 +127,9 @@ def _model_data_settings(predictor) -> dict:
 # 300-Gaussian objects), the same turned by 90° a median of 0.55–0.70 (docs/usage.md "The input").
 # A margin below the true geometry's: a correct geometry refused is worse than a wrong one let by.
 MIN_PLACED_IOU = 0.6
+# A launch faster than this is not a drop or a toss filmed on a floor (a fall from 5 m lands at
+# 10 m/s): the first frames' masks do not follow the object, or its distance is misread
+MAX_INITIAL_SPEED_M_S = 10.0
 MESH_GAUSSIANS = 4000  # Gaussians sampled from a given mesh (--mesh)
 
 
@@ -300,6 +303,19 @@ def _start_how(start: float | str, found: float) -> str:
     return "given (--start)" if start else "frame 0 of the recording"
 
 
+def check_initial_speed(velocity: torch.Tensor, source: str) -> None:  # velocity [3] m/s
+    """InputError (naming the recording) when the initial velocity read is faster than
+    :data:`MAX_INITIAL_SPEED_M_S`: a confident wrong launch is worse than a refusal."""
+    speed = float(velocity.norm())
+    if not speed <= MAX_INITIAL_SPEED_M_S:
+        raise InputError(
+            f"the first frames read as a launch at {speed:.3g} m/s (more than "
+            f"{MAX_INITIAL_SPEED_M_S:g}): the masks do not follow a falling object, or its "
+            "distance is misread; give the masks with --masks DIR (or its shape with --gaussians)",
+            source=source,
+        )
+
+
 def predict_observation(
     observation: Observation,
     predictor,  # a LoadedPredictor (reconphys.models.shipped)
@@ -364,6 +380,7 @@ def predict_observation(
             spread = math.log(estimate["size_factor_10_90"][1]) / Z_10_90
             across = observation.camera.world_to_cam[:3, :3].to(velocity) @ velocity
             error = (error**2 + (spread * across) ** 2).sqrt()
+        check_initial_speed(velocity, observation.source)
         at_rest = not bool(velocity.any())
         details["initial_velocity"] = {
             "linear_m_s": [round(float(x), 4) for x in velocity],

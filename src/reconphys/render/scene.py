@@ -15,7 +15,7 @@ higher they are; it is an appearance cue, not a physical light transport.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import torch
@@ -26,6 +26,9 @@ from ..assets.gaussians import SH_C0, Gaussians
 from .cameras import Cameras
 
 GROUND_PATTERNS = ("checker", "stripes", "tiles", "noise")
+# the vivid look's (vivid_look): also "patches", blobs of three to five colours (a play mat, a rug)
+VIVID_GROUND_PATTERNS = (*GROUND_PATTERNS, "patches")
+OBJECT_PATTERNS = ("none", "checker", "stripes", "patches")  # printed on the object (vivid)
 NOISE_GRID = 16  # cells of the periodic value-noise textures
 FOG_DISTANCE = 12.0  # metres: the ground fades into the horizon colour beyond this
 SHADOW_GRID = 64  # cells per side of the shadow map around the object's footprint
@@ -35,8 +38,8 @@ SHADOW_GRID = 64  # cells per side of the shadow map around the object's footpri
 class SceneLook:
     """Everything random about one scene (colours RGB in [0, 1], lengths in metres)."""
 
-    ground_pattern: str  # one of GROUND_PATTERNS
-    ground_colors: tuple[tuple[float, float, float], tuple[float, float, float]]
+    ground_pattern: str  # one of VIVID_GROUND_PATTERNS
+    ground_colors: tuple[tuple[float, float, float], ...]  # two; "patches": three to five
     ground_period: float  # metres per pattern repeat
     ground_angle: float  # radians: the pattern's rotation about z
     horizon_color: tuple[float, float, float]
@@ -46,6 +49,12 @@ class SceneLook:
     ambient: float  # share of the light that is not direct (fills shadows)
     noise_sigma: float  # sensor noise, standard deviation in [0, 1] colour units
     texture_seed: int
+    # a pattern printed on the object (OBJECT_PATTERNS; vivid_look), in its frame-0 coordinates:
+    # colours mixed into the Gaussians' own by ``object_mix``, ``object_period`` metres a repeat
+    object_pattern: str = "none"
+    object_colors: tuple[tuple[float, float, float], ...] = ()
+    object_period: float = 0.1
+    object_mix: float = 0.0
 
     def to_dict(self) -> dict:  # JSON-ready (tuples are written as lists)
         return asdict(self)
@@ -84,6 +93,65 @@ def draw_look(rng: np.random.Generator, noise_range: tuple[float, float]) -> Sce
     )
 
 
+def vivid_look(rng: np.random.Generator, look: SceneLook, size: float) -> SceneLook:
+    """``look`` made vivid (the scenes a muted look never shows: a play mat, a painted wall, a
+    printed toy): saturated ground colours, unrelated to each other, in any of
+    VIVID_GROUND_PATTERNS; a saturated backdrop with strong bands; a pattern printed on the
+    object (largest side ``size`` metres) on three in four. Light, noise and texture seed stay."""
+
+    def saturated() -> tuple[float, float, float]:
+        hue, saturation, value = rng.uniform(), rng.uniform(0.35, 1.0), rng.uniform(0.3, 1.0)
+        k = (np.array([5.0, 3.0, 1.0]) + hue * 6) % 6
+        rgb = value - value * saturation * np.clip(np.minimum(k, 4 - k), 0, 1)
+        return tuple(float(c) for c in rgb)
+
+    pattern = str(rng.choice(VIVID_GROUND_PATTERNS))
+    count = int(rng.integers(3, 6)) if pattern == "patches" else 2
+    printed = str(rng.choice(OBJECT_PATTERNS[1:])) if rng.random() < 0.75 else "none"
+    return replace(
+        look,
+        ground_pattern=pattern,
+        ground_colors=tuple(saturated() for _ in range(count)),
+        horizon_color=saturated(),
+        zenith_color=saturated(),
+        band_contrast=float(rng.uniform(0.3, 0.9)),
+        object_pattern=printed,
+        object_colors=tuple(saturated() for _ in range(int(rng.integers(2, 4)))),
+        object_period=float(size * rng.uniform(0.15, 0.6)),
+        object_mix=float(rng.uniform(0.5, 1.0)),
+    )
+
+
+def _palette(blend: Tensor, colours: Tensor) -> Tensor:
+    """Blend [...] in [0, 1] → the colour [..., 3] of its band among ``colours`` [K, 3]."""
+    index = (blend * colours.shape[0]).long().clamp(0, colours.shape[0] - 1)
+    return colours[index]
+
+
+def print_pattern(
+    colours: Tensor,  # [N, 3] the Gaussians' colours in [0, 1]
+    points: Tensor,  # [N, 3] their frame-0 positions, metres
+    look: SceneLook,
+    generator: torch.Generator,
+) -> Tensor:  # [N, 3]
+    """The object's colours with ``look``'s printed pattern (none: unchanged)."""
+    if look.object_pattern == "none":
+        return colours
+    local = (points - points.mean(0)) / look.object_period
+    palette = torch.tensor(look.object_colors, dtype=colours.dtype)
+    if look.object_pattern == "checker":
+        blend = (torch.floor(local).sum(-1) % 2) / 2 + 0.25
+    elif look.object_pattern == "stripes":
+        blend = torch.frac(local[:, 0] + 0.5 * local[:, 1]) * 0.999
+    else:  # "patches": 3-D value noise, as two 2-D ones
+        grid = torch.rand(NOISE_GRID, NOISE_GRID, generator=generator, dtype=colours.dtype)
+        blend = 0.5 * (
+            _value_noise(local[:, 0], local[:, 1], grid)
+            + _value_noise(local[:, 2] + 7.0, local[:, 0], grid)
+        )
+    return (1 - look.object_mix) * colours + look.object_mix * _palette(blend, palette)
+
+
 def _value_noise(u: Tensor, v: Tensor, grid: Tensor) -> Tensor:
     """Periodic bilinear value noise: coordinates [...] in grid cells, grid [G, G] → [...]."""
     size = grid.shape[0]
@@ -112,6 +180,10 @@ def _ground_albedo(xy: Tensor, look: SceneLook, generator: torch.Generator) -> T
         fu, fv = u - torch.floor(u), v - torch.floor(v)
         grout = (fu < 0.06) | (fv < 0.06)
         blend = torch.where(grout, torch.ones_like(u), 0.3 * grain)
+    elif look.ground_pattern == "patches":
+        blend = _value_noise(u, v, grid)
+        colours = torch.tensor(look.ground_colors, dtype=xy.dtype)
+        return _palette(blend, colours) * (0.9 + 0.1 * grain[..., None])
     else:  # "noise": concrete, carpet
         blend = _value_noise(u, v, grid)
     blend = (0.85 * blend + 0.15 * grain).clamp(0, 1)[..., None]
