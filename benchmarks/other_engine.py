@@ -46,11 +46,6 @@ TEST_MESHES = "data/pyb"  # its test split's meshes: held out of every network's
 TEXTURES = ("checker_blue.png", "checker_grid.jpg", "tex256.png", "uvmap.png", "cube.png")
 
 
-def _obj_vertices(path: Path) -> np.ndarray:  # [N, 3]
-    rows = [line.split()[1:4] for line in path.read_text().splitlines() if line.startswith("v ")]
-    return np.array(rows, dtype=np.float64)
-
-
 def _test_meshes(data: str) -> list[str]:
     """The pybullet meshes of dataset ``data``'s test split."""
     manifest = json.loads((Path(data) / "manifest.json").read_text())
@@ -80,6 +75,8 @@ def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int
     """One drop; None when the object leaves the frame or touches its border (drawn again)."""
     import pybullet_data
 
+    from reconphys.assets.mesh import load_mesh
+
     data = Path(pybullet_data.getDataPath())
     p.resetSimulation()
     p.setGravity(0, 0, -9.81)
@@ -95,7 +92,7 @@ def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int
 
     # the object: one of the held-out meshes, its largest side 0.1–0.6 m
     urdf = data / mesh.replace(".obj", ".urdf")
-    vertices = _obj_vertices(data / mesh) * 0.015  # the URDFs' mesh scale
+    vertices = np.asarray(load_mesh(data / mesh).vertices) * 0.015  # the URDFs' mesh scale
     extent = float((vertices.max(0) - vertices.min(0)).max())
     size = float(math.exp(rng.uniform(math.log(0.1), math.log(0.6))))
     scaling = size / extent

@@ -14,6 +14,7 @@ higher they are; it is an appearance cue, not a physical light transport.
 
 from __future__ import annotations
 
+import colorsys
 import math
 from dataclasses import asdict, dataclass, replace
 
@@ -101,9 +102,7 @@ def vivid_look(rng: np.random.Generator, look: SceneLook, size: float) -> SceneL
 
     def saturated() -> tuple[float, float, float]:
         hue, saturation, value = rng.uniform(), rng.uniform(0.35, 1.0), rng.uniform(0.3, 1.0)
-        k = (np.array([5.0, 3.0, 1.0]) + hue * 6) % 6
-        rgb = value - value * saturation * np.clip(np.minimum(k, 4 - k), 0, 1)
-        return tuple(float(c) for c in rgb)
+        return colorsys.hsv_to_rgb(float(hue), float(saturation), float(value))
 
     pattern = str(rng.choice(VIVID_GROUND_PATTERNS))
     count = int(rng.integers(3, 6)) if pattern == "patches" else 2
