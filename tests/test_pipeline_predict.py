@@ -526,6 +526,8 @@ def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (
         (lambda t: _square(t), "does not move (every frame overlaps frame 0 by IoU ≥ 1.00)"),
         (lambda t: _square(t) if t < 3 else np.zeros((32, 32), np.uint8),
          "the object is found in only 3 of 30 frames"),
+        (lambda t: _square(t, top=min(2 * t, 24)) | (_square(t, top=20) if t == 0 else 0),
+         "the object's mask in frame 0 is not the one of frame 2 (area ×2.00, overlap IoU 0.00"),
         (lambda t: _square(t, top=min(4 + 2 * max(0, t - 7), 24)),  # held for 8 frames
          "does not move in frames 0–7 (0.24 s): frame 0 must be the release; give --start SECONDS "
          "(about 0.18 here"),
@@ -533,7 +535,8 @@ def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (
 )  # fmt: skip
 def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     """Masks that cannot be one released object (background, a static region, an object that is
-    not there, one held still before its release) are refused with what to give instead, and no
+    not there, a frame 0 with a second object where it will land, one held still before its
+    release) are refused with what to give instead, and no
     asset; a square that falls 2 px a frame (then rests) passes the same checks."""
     from reconphys.capture.masks import check_masks, check_release
 
@@ -552,6 +555,23 @@ def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     falling = np.stack([_square(t, top=min(2 * t, 24)) for t in range(30)]) / 255.0
     check_masks(torch.from_numpy(falling).float(), "falling")  # no error
     check_release(torch.from_numpy(falling).float(), "falling")
+
+
+def test_first_frames_agreement():
+    """Frame 0's mask against frame 2's: a moved copy agrees exactly (IoU 1, area ×1) wherever
+    it is; half of it overlaps by 0.5 at ×2 the area; an empty frame 2 does not agree."""
+    from reconphys.capture.masks import first_frames_agreement
+
+    masks = torch.zeros(3, 32, 32)
+    masks[0, 3:9, 4:12] = 1
+    masks[2, 20:26, 17:25] = 1  # the same 6 × 8 block, moved 17 px down and 13 right
+    assert first_frames_agreement(masks) == (1.0, 1.0)
+    masks[2] = 0
+    masks[2, 20:23, 17:25] = 1  # its top half
+    overlap, ratio = first_frames_agreement(masks)
+    assert ratio == 2.0 and abs(overlap - 0.5) < 1e-9
+    masks[2] = 0
+    assert first_frames_agreement(masks) == (0.0, float("inf"))
 
 
 @pytest.mark.parametrize(
