@@ -288,3 +288,50 @@ def test_the_release_of_a_held_object_is_read_from_its_fall():
         assert found == pytest.approx(release, abs=0.3 * 0.03), release
     assert release_time(_held_disc(-0.05), 0.03) is None  # falling from the start: not held
     assert release_time(_held_disc(5.0), 0.03) is None  # never released
+
+
+def test_a_camera_file_must_fit_the_fall():
+    """check_camera_file: a ball's exact masks pass with their own camera (the fall within a few
+    degrees of gravity's image direction); the same camera in OpenGL's convention (y up, z
+    backwards) sees the object fall away from gravity, a camera under the ground is refused, and
+    a clip filmed from below that ends before the landing has no ground under the object."""
+    from reconphys.capture.calibrate import check_camera_file, fall_direction
+    from reconphys.capture.camera import CameraSpec
+
+    masks, w2c, _ = ball_masks(15.0, 2.0, 0.45, 0.1)
+    K = intrinsics_from_fov(45.0, 96, 96, dtype=torch.float64)
+    camera = CameraSpec(K, torch.from_numpy(w2c), 96, 96, 0.0, "cam.json")
+    angle, moved, across = fall_direction(masks, 0.03, camera)
+    assert angle < 3.0 and moved > 10.0 and across > 0.9
+    check_camera_file(masks, 0.03, camera, 0.5)  # no error
+    flipped = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))
+    opengl = CameraSpec(K, flipped @ camera.world_to_cam, 96, 96, 0.0, "cam.json")
+    assert fall_direction(masks, 0.03, opengl)[0] > 177.0
+    with pytest.raises(InputError, match=r"cam.json \[world_to_cam\]: in this camera the object "):
+        check_camera_file(masks, 0.03, opengl, 0.5)
+    under = CameraSpec(K, camera.world_to_cam, 96, 96, 3.0, "cam.json")  # the ground 3 m up
+    with pytest.raises(InputError, match="below the ground"):
+        check_camera_file(masks, 0.03, under, 0.5)
+    masks, w2c, _ = ball_masks(-40.0, 3.0, 5.0, 0.1, fov=60.0)  # from below; lands after 1 s
+    K = intrinsics_from_fov(60.0, 96, 96, dtype=torch.float64)
+    below = CameraSpec(K, torch.from_numpy(w2c), 96, 96, 0.0, "cam.json")
+    assert fall_direction(masks, 0.03, below)[0] < 5.0
+    with pytest.raises(InputError, match="does not end on a ground this camera sees"):
+        check_camera_file(masks, 0.03, below, 0.5)
+
+
+def test_rest_depth_is_where_the_ray_meets_the_ground():
+    """The ray through the last mask's lowest pixel edge at the image centre of a camera aimed
+    at the origin from (4, 0, 1) meets the ground at the origin: √17 m along the view; above
+    the horizon (14° up from the centre row: row 13) no ray does."""
+    from reconphys.capture.calibrate import rest_depth
+    from reconphys.capture.camera import CameraSpec
+
+    K = intrinsics_from_fov(45.0, 64, 64, dtype=torch.float64)
+    w2c = look_at(torch.tensor([4.0, 0.0, 1.0]), torch.zeros(3)).double()
+    masks = torch.zeros(3, 64, 64)
+    masks[-1, 26:32, 28:36] = 1  # lowest row 31: its bottom edge is the centre row; columns ↔ 32
+    assert rest_depth(masks, CameraSpec(K, w2c, 64, 64)) == pytest.approx(math.sqrt(17), rel=1e-6)
+    masks[-1] = 0
+    masks[-1, 0:4, 28:36] = 1  # above the horizon
+    assert rest_depth(masks, CameraSpec(K, w2c, 64, 64)) is None

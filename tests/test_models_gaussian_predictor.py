@@ -320,3 +320,37 @@ def test_the_object_distance_without_a_fall_is_where_it_rests_on_the_ground():
     assert abs(float(point_world[2])) < 1e-6
     with pytest.raises(InputError, match="--gaussians or --mesh"):
         object_distance(observations[1])
+
+
+def test_a_fall_misread_against_a_known_cameras_ground_gives_way_to_the_rest():
+    """With a known camera the fall's distance is checked against where the object rests on its
+    ground: a fall whose pixels accelerate ten times too slowly (read ~10× too far) is not used,
+    the rest is (and prediction.json says why); with a camera read from the video the ground
+    itself comes from the fall, so the fall stands. A distance that makes the object over
+    MAX_READ_SIZE_M across is refused, naming the camera file."""
+    from dataclasses import replace
+
+    from reconphys.capture.calibrate import object_depth, rest_depth
+
+    camera = default_camera(64, 64, view=0)
+    masks = torch.zeros(30, 64, 64)
+    for t in range(30):  # 6 px, falling at 40 px/s² from row 10 (a 0.9-s fall: 15 px)
+        top = 10 + round(0.5 * 40.0 * (t * 0.03) ** 2)
+        masks[t, top : top + 6, 29:35] = 1.0
+    frames = masks[..., None].expand(-1, -1, -1, 3) * 0.5
+    known = stored_observation(frames, camera.K, camera.world_to_cam, 0.03, "slow", masks=masks)
+    fall = object_depth(masks, 0.03, camera)
+    rest = rest_depth(masks, camera)
+    assert fall > 2 * rest > 0
+    depth, how = object_distance(known)
+    assert depth == rest and how.startswith("rest on the ground (the fall read")
+    estimated = replace(known, camera_estimate={"how": "from the video"})
+    assert object_distance(estimated) == (fall, "fall")
+    wide = torch.zeros(30, 64, 64)
+    for t in range(30):  # 24 px wide, falling at 20 px/s² from the top: resting ~13 m away
+        top = round(0.5 * 20.0 * (t * 0.03) ** 2)
+        wide[t, top : top + 6, 20:44] = 1.0
+    frames = wide[..., None].expand(-1, -1, -1, 3) * 0.5
+    far = stored_observation(frames, camera.K, camera.world_to_cam, 0.03, "wide", masks=wide)
+    with pytest.raises(InputError, match=r"the object would be 3\.\d+ m across"):
+        object_distance(far)

@@ -594,6 +594,22 @@ def test_camera_file_with_wrong_shapes(bundle, tmp_path, change, expected):
     )
 
 
+def test_a_camera_file_in_another_convention_is_refused(bundle, tmp_path):
+    """The bundle's camera written the OpenGL way (y up, z backwards: its second and third rows
+    negated): the object then falls up in its image — refused, naming the file's field, before
+    anything is written (a pybullet drop given so was answered with the object 2,000 km away)."""
+    camera = json.loads((bundle / "camera.json").read_text())
+    flip = np.diag([1.0, -1.0, -1.0, 1.0])
+    camera["world_to_cam"] = (flip @ np.array(camera["world_to_cam"])).tolist()
+    path = tmp_path / "opengl.json"
+    path.write_text(json.dumps(camera))
+    _fails(
+        [bundle / "video.mp4", "--camera", path, "--gaussians", bundle / "gaussians.ply"],
+        tmp_path,
+        "opengl.json [world_to_cam]: in this camera the object falls",
+    )
+
+
 def _hull(bundle, tmp_path, stretch=(1.0, 1.0, 1.0)):
     """The convex hull of the true Gaussians' visible extent (each centre ± 1.5 σ along the axes:
     these 300 Gaussians are large), in frame 0's pose (optionally stretched about its centre): a

@@ -282,6 +282,112 @@ def _free_fall_frames(track: _Track, frame_dt: float, fit_px: float) -> int:
     return count
 
 
+def fall_direction(
+    masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
+    frame_dt: float,  # seconds between frames
+    camera: CameraSpec,  # a known camera (a file's)
+    fit_px: float = FALL_FIT_PX,
+) -> tuple[float, float, float] | None:
+    """How the fall seen in the masks agrees with the camera's gravity: (the angle in degrees
+    between the centroid's acceleration over the free fall and the image direction in which
+    world-down moves a point at frame 0's centroid; how far that acceleration moves the centroid
+    over the fall, px; the share of gravity across the view there, 0–1). None when the fall
+    shows in fewer than :data:`MIN_FALL_FRAMES` frames.
+
+    Across the view gravity moves a point at pixel (x, y) (normalised) towards
+    ``(g_x − x·g_z, g_y − y·g_z)``, g the camera frame's world-down: a direction that does not
+    depend on the point's depth."""
+    track = mask_track(masks)
+    count = fall_frames(track, frame_dt, fit_px)
+    if count < MIN_FALL_FRAMES:
+        return None
+    times = np.arange(count) * frame_dt
+    acceleration = np.array(
+        [2 * np.polyfit(times, track.centroid[:count, i], 2)[0] for i in (0, 1)]
+    )
+    K = camera.K.double().numpy()
+    down = camera.world_to_cam[:3, :3].double().numpy() @ np.array([0.0, 0.0, -1.0])
+    x = (track.centroid[0, 0] - K[0, 2]) / K[0, 0]
+    y = (track.centroid[0, 1] - K[1, 2]) / K[1, 1]
+    expected = np.array([K[0, 0] * (down[0] - x * down[2]), K[1, 1] * (down[1] - y * down[2])])
+    across = float(np.hypot(down[0] - x * down[2], down[1] - y * down[2]))
+    cosine = float(acceleration @ expected) / max(
+        float(np.linalg.norm(acceleration) * np.linalg.norm(expected)), 1e-12
+    )
+    moved = 0.5 * float(np.linalg.norm(acceleration)) * float(times[-1]) ** 2
+    return math.degrees(math.acos(max(-1.0, min(1.0, cosine)))), moved, across
+
+
+# A camera file must agree with the fall: the masks' acceleration within 90° of where gravity
+# moves a point in its image (exact masks of 1,090 clips with their true cameras: all but 2
+# within 28°; an OpenGL camera, y up and z backwards, reads 150–180°), once it moves the
+# centroid FALL_CHECK_PX or more. docs/usage.md "Bad input".
+MAX_FALL_ANGLE_DEG = 90.0
+FALL_CHECK_PX = 3.0
+
+
+def check_camera_file(masks: Tensor, frame_dt: float, camera: CameraSpec, fit_px: float) -> None:
+    """Refuse a camera file that cannot be the recording's (one-line InputError naming it): a
+    camera at or below the ground, one in whose image the object falls away from gravity (see
+    :func:`fall_direction`), or one that does not see the ground where the object rests (see
+    :func:`rest_depth`) — most often a camera in another convention (OpenGL: y up, z
+    backwards) or the camera-to-world matrix given as world_to_cam."""
+    from .placement import camera_centre
+
+    height = float(camera_centre(camera)[2]) - camera.ground_height
+    if not height > 0:
+        raise InputError(
+            f"puts the camera {-height:.3g} m below the ground (at or under ground_height "
+            f"{camera.ground_height:g}): {CAMERA_CONVENTION}",
+            source=camera.source,
+            field="world_to_cam",
+        )
+    fall = fall_direction(masks, frame_dt, camera, fit_px)
+    if fall is not None and fall[0] > MAX_FALL_ANGLE_DEG and fall[1] >= FALL_CHECK_PX:
+        raise InputError(
+            f"in this camera the object falls {fall[0]:.0f}° away from gravity's direction in "
+            f"the image: {CAMERA_CONVENTION}; or the masks do not follow the object (give them "
+            "with --masks DIR)",
+            source=camera.source,
+            field="world_to_cam",
+        )
+    if rest_depth(masks, camera) is None:
+        raise InputError(
+            "the object does not end on a ground this camera sees (the ray through the last "
+            "frame's lowest object pixel does not meet the ground in front of it): record "
+            f"until it rests, or check the camera file: {CAMERA_CONVENTION}",
+            source=camera.source,
+            field="world_to_cam",
+        )
+
+
+def rest_depth(masks: Tensor, camera: CameraSpec) -> float | None:
+    """Metres: the camera z where the ray through the last frame's lowest object pixel (at its
+    columns' mean) meets the camera's ground, the object resting on it; None when that ray does
+    not meet the ground in front of the camera (or the last mask is empty)."""
+    from .placement import ray
+
+    rows, cols = torch.nonzero(masks[-1] > 0.5, as_tuple=True)
+    if not len(rows):
+        return None
+    pixel = torch.tensor([float(cols.double().mean()) + 0.5, float(rows.max()) + 1.0])
+    centre, direction = ray(pixel.double(), camera)
+    ground = camera.ground_height
+    if not (float(direction[2]) < -1e-6 and float(centre[2]) > ground):
+        return None
+    point = centre + direction * (ground - centre[2]) / direction[2]
+    w2c = camera.world_to_cam.double()
+    depth = float((w2c[:3, :3] @ point + w2c[:3, 3])[2])
+    return depth if depth > 0 else None
+
+
+CAMERA_CONVENTION = (
+    "world_to_cam must take a world with z up to an OpenCV camera (x right, y down, z forward; "
+    "an OpenGL or Blender camera has y up and z backwards: negate its second and third rows), "
+    "not the camera's pose (camera to world)"
+)
+
+
 def object_depth(
     masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
     frame_dt: float,  # seconds between frames

@@ -28,7 +28,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from .calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX, estimate_camera
+from .calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX, check_camera_file, estimate_camera
 from .camera import CameraSpec, default_camera, read_camera
 from .interpolate import frames_between
 from .masks import (
@@ -257,6 +257,7 @@ def load_observation(
         spec = default_camera(width, height)
     else:
         spec = read_camera(camera, *recorded_size).resized(width, height)
+        check_camera_file(chosen, frame_dt, spec, fit_px)
     return Observation(
         recording=rgb,
         frames=objects,
