@@ -20,10 +20,20 @@ errors) and prints: the mask segmenter's IoU with the true masks; the camera rea
 error as benchmarks/realistic_input.py defines them; then ``predict --no-refine`` (the shipped
 segmenter) on the mp4 alone and again with the camera file: refusals, the initial velocity in
 the camera's axes against the truth and, for clips released from rest, how many come back over
-0.1 m/s; seconds a clip.
+0.1 m/s; seconds a clip. ``--search`` runs predict's default path (the physics fitted to the
+recording) instead, ``--true-masks`` adds a third run with pybullet's own masks (``--masks``)
+and the camera file.
+
+``render --soft`` drops pybullet's deformable bodies instead (a mass-spring on the mesh's edges,
+with bending springs, from rest; SOFT_MESHES, the pybullet_data meshes its renderer draws right
+that way, stiffness and damping log-uniform); ``measure`` then also says whether the physics
+orders pybullet's springs (Spearman's ρ of the log k/m and log d/m read against its log
+stiffness / mass and log damping / mass, over all clips and within each mesh).
 
     python benchmarks/other_engine.py render data/engine_pyb --clips 40 --size 128x128
     python benchmarks/other_engine.py measure data/engine_pyb
+    python benchmarks/other_engine.py render data/engine_soft --clips 42 --seed 31 --soft
+    python benchmarks/other_engine.py measure data/engine_soft --search --true-masks
 """
 
 from __future__ import annotations
@@ -32,15 +42,31 @@ import argparse
 import json
 import math
 import platform
+import shutil
+import tempfile
 import time
 from pathlib import Path
 
+import imageio.v3 as imageio
 import numpy as np
 import torch
 
 FRAME_DT = 0.03  # s, the project's frame interval (docs/design.md#conventions)
 FRAMES = 30
 SUBSTEPS = 10  # pybullet steps a frame
+SOFT_SUBSTEPS = 20  # for its deformable (mass-spring) bodies
+SOFT_STIFFNESS = (3.0, 1000.0)  # springElasticStiffness, log-uniform: collapses … barely squashes
+SOFT_DAMPING = (0.01, 1.0)  # springDampingStiffness, log-uniform
+# pybullet_data meshes its TinyRenderer draws right as deformable bodies (the random_urdfs ones
+# come out as triangles across the frame)
+SOFT_MESHES = (
+    "bunny.obj",
+    "duck.obj",
+    "soccerball.obj",
+    "sphere_smooth.obj",
+    "torus/torus_textured.obj",
+    "cube.obj",
+)
 SUPERSAMPLE = 2  # rendered at 2× and area-averaged (TinyRenderer does not anti-alias)
 TEST_MESHES = "data/pyb"  # its test split's meshes: held out of every network's training
 TEXTURES = ("checker_blue.png", "checker_grid.jpg", "tex256.png", "uvmap.png", "cube.png")
@@ -71,16 +97,29 @@ def _area_average(image: np.ndarray, factor: int) -> np.ndarray:
     return image.reshape(h, factor, w, factor, *image.shape[2:]).mean((1, 3))
 
 
-def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int) -> dict | None:
-    """One drop; None when the object leaves the frame or touches its border (drawn again)."""
+def _soft_vertices(p, body: int) -> np.ndarray:  # [N, 3] a deformable body's nodes, world
+    return np.asarray(p.getMeshData(body, -1, flags=p.MESH_DATA_SIMULATION_MESH)[1])
+
+
+def _render_clip(
+    p, rng: np.random.Generator, mesh: str, width: int, height: int, soft: bool = False
+) -> dict | None:
+    """One drop; None when the object leaves the frame or touches its border (drawn again).
+    ``soft``: the mesh as pybullet's mass-spring deformable body (a spring on every edge and
+    bending springs; stiffness and damping drawn from SOFT_STIFFNESS, SOFT_DAMPING), released
+    from rest."""
     import pybullet_data
 
     from reconphys.assets.mesh import load_mesh
 
     data = Path(pybullet_data.getDataPath())
-    p.resetSimulation()
+    substeps = SOFT_SUBSTEPS if soft else SUBSTEPS
+    if soft:  # the mesh's nodes as pybullet reads them (unit scale, at the origin)
+        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD)
+        unit = _soft_vertices(p, p.loadSoftBody(str(data / mesh), useMassSpring=1))
+    p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD if soft else 0)
     p.setGravity(0, 0, -9.81)
-    p.setTimeStep(FRAME_DT / SUBSTEPS)
+    p.setTimeStep(FRAME_DT / substeps)
     plane = p.loadURDF(str(data / "plane.urdf"))
     look = {"floor": TEXTURES[rng.integers(len(TEXTURES))], "wall": None, "object": None}
     floor_texture = p.loadTexture(str(data / look["floor"]))
@@ -92,7 +131,10 @@ def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int
 
     # the object: one of the held-out meshes, its largest side 0.1–0.6 m
     urdf = data / mesh.replace(".obj", ".urdf")
-    vertices = np.asarray(load_mesh(data / mesh).vertices) * 0.015  # the URDFs' mesh scale
+    if soft:
+        vertices = unit
+    else:
+        vertices = np.asarray(load_mesh(data / mesh).vertices) * 0.015  # the URDFs' mesh scale
     extent = float((vertices.max(0) - vertices.min(0)).max())
     size = float(math.exp(rng.uniform(math.log(0.1), math.log(0.6))))
     scaling = size / extent
@@ -100,7 +142,7 @@ def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int
     orientation = p.getQuaternionFromEuler(rng.uniform(-math.pi, math.pi, 3).tolist())
     rotation = np.array(p.getMatrixFromQuaternion(orientation)).reshape(3, 3)
     lowest_below = -float((vertices @ rotation.T)[:, 2].min())
-    from_rest = bool(rng.random() < 0.5)
+    from_rest = soft or bool(rng.random() < 0.5)
     if from_rest:
         velocity, spin = np.zeros(3), np.zeros(3)
     else:
@@ -117,22 +159,51 @@ def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int
     if drop < 0.03:
         return None
     centre0 = np.array([0.0, 0.0, drop + lowest_below])
-    body = p.loadURDF(
-        str(urdf), centre0.tolist(), orientation, globalScaling=scaling, useFixedBase=False
-    )
     mass = float(rng.uniform(0.05, 2.0))
-    inertia = mass * size**2 / 12.0
-    p.changeDynamics(
-        body,
-        -1,
-        mass=mass,
-        localInertiaDiagonal=[inertia] * 3,
-        lateralFriction=friction,
-        restitution=float(rng.uniform(0.0, 0.5)),
-        linearDamping=0.0,
-        angularDamping=0.0,
-    )
-    p.resetBaseVelocity(body, velocity.tolist(), spin.tolist())
+    springs = None
+    if soft:  # its bounding box's centre over the origin, its lowest node `drop` up
+        turned = vertices @ rotation.T
+        base = centre0 - np.array([*(turned.max(0) + turned.min(0))[:2] / 2, 0.0])
+        springs = {
+            "stiffness": float(math.exp(rng.uniform(*np.log(SOFT_STIFFNESS)))),
+            "damping": float(math.exp(rng.uniform(*np.log(SOFT_DAMPING)))),
+        }
+        body = p.loadSoftBody(
+            str(data / mesh),
+            basePosition=base.tolist(),
+            baseOrientation=orientation,
+            scale=scaling,
+            mass=mass,
+            useMassSpring=1,
+            useBendingSprings=1,
+            useNeoHookean=0,
+            springElasticStiffness=springs["stiffness"],
+            springDampingStiffness=springs["damping"],
+            springDampingAllDirections=1,
+            useSelfCollision=0,
+            frictionCoeff=friction,
+            useFaceContact=1,
+            collisionMargin=0.002,
+        )
+        p.setGravity(0, 0, 0)  # one step at rest: TinyRenderer draws a deformable body's
+        p.stepSimulation()  # nodes only after the first step
+        p.setGravity(0, 0, -9.81)
+    else:
+        body = p.loadURDF(
+            str(urdf), centre0.tolist(), orientation, globalScaling=scaling, useFixedBase=False
+        )
+        inertia = mass * size**2 / 12.0
+        p.changeDynamics(
+            body,
+            -1,
+            mass=mass,
+            localInertiaDiagonal=[inertia] * 3,
+            lateralFriction=friction,
+            restitution=float(rng.uniform(0.0, 0.5)),
+            linearDamping=0.0,
+            angularDamping=0.0,
+        )
+        p.resetBaseVelocity(body, velocity.tolist(), spin.tolist())
 
     # the camera: a vertical field of view 35–55°, 5–30° down, the object 12–35 % of the
     # frame's height at its release, aimed between the release and the ground, off-centre
@@ -181,14 +252,21 @@ def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int
     contact_frame = None
     for t in range(FRAMES):
         if t:
-            for _ in range(SUBSTEPS):
+            for _ in range(substeps):
                 p.stepSimulation()
-            if contact_frame is None and p.getContactPoints(body, plane):
-                contact_frame = t
-        position, quaternion = p.getBasePositionAndOrientation(body)
-        rotation = np.array(p.getMatrixFromQuaternion(quaternion)).reshape(3, 3)
-        # the URDFs' inertial origin is the link's: the base pose is the mesh frame's
-        world = vertices @ rotation.T + np.array(position)  # [N, 3]
+        if soft:
+            world = _soft_vertices(p, body)  # [N, 3]
+            if not np.isfinite(world).all():
+                return None
+            touching = world[:, 2].min() < 0.005
+        else:
+            position, quaternion = p.getBasePositionAndOrientation(body)
+            rotation = np.array(p.getMatrixFromQuaternion(quaternion)).reshape(3, 3)
+            # the URDFs' inertial origin is the link's: the base pose is the mesh frame's
+            world = vertices @ rotation.T + np.array(position)  # [N, 3]
+            touching = bool(t and p.getContactPoints(body, plane))
+        if contact_frame is None and touching:
+            contact_frame = t
         lowest.append(world[world[:, 2].argmin()].tolist())
         centres.append(((world.max(0) + world.min(0)) / 2).tolist())
         _, _, rgba, _, segmentation = p.getCameraImage(
@@ -238,6 +316,8 @@ def _render_clip(p, rng: np.random.Generator, mesh: str, width: int, height: int
             "mass_kg": mass,
             "friction": friction,
             "textures": look,  # pybullet_data images on the floor, the wall, the object
+            # pybullet's mass-spring body: its spring stiffness and damping (None: rigid)
+            "springs": springs,
         },
     }
 
@@ -251,7 +331,7 @@ def render(args) -> None:
     width, height = (int(x) for x in args.size.split("x"))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    meshes = _test_meshes(args.meshes)
+    meshes = list(SOFT_MESHES) if args.soft else _test_meshes(args.meshes)
     rng = np.random.default_rng(args.seed)
     client = p.connect(p.DIRECT)
     written, tries = 0, 0
@@ -260,7 +340,7 @@ def render(args) -> None:
         while written < args.clips:
             tries += 1
             mesh = meshes[written % len(meshes)]
-            clip = _render_clip(p, rng, mesh, width, height)
+            clip = _render_clip(p, rng, mesh, width, height, args.soft)
             if clip is None:
                 continue
             folder = out / f"{written:04d}"
@@ -326,6 +406,10 @@ def measure(args) -> None:
             "from_rest": truth["released_from_rest"],
             "iou": mean_mask_iou(masks, true_masks),
         }
+        if truth.get("springs"):  # a deformable drop: what the physics should order
+            row["springs"] = truth["springs"]
+            row["mass_kg"] = truth["mass_kg"]
+            row["squash"] = _squash(true_masks, truth["first_contact_frame"])
         for name, used, fov, fit_px in (
             ("camera_true_masks", true_masks, truth["fov_deg"], FALL_FIT_PX),
             ("camera_segmenter", masks, None, SEGMENTER_FALL_FIT_PX),
@@ -335,11 +419,18 @@ def measure(args) -> None:
             except InputError as e:
                 row[name] = {"refused": str(e)}
         if not args.no_predict:  # the mp4 alone, then with the camera file
-            for name, options in (
-                ("predict", {}),
-                ("predict_camera_file", {"camera": folder / "camera.json"}),
-            ):
-                row[name] = _predict(folder / "video.mp4", options, truth, camera)
+            runs = [("predict", {}), ("predict_camera_file", {"camera": folder / "camera.json"})]
+            if args.true_masks:  # the engine's own masks as --masks DIR, and the camera file
+                masks_dir = Path(tempfile.mkdtemp())
+                for t, mask in enumerate(true_masks.numpy() > 0.5):
+                    imageio.imwrite(masks_dir / f"{t:03d}.png", (mask * 255).astype(np.uint8))
+                runs.append(
+                    ("predict_true_masks", {"camera": folder / "camera.json", "masks": masks_dir})
+                )
+            for name, options in runs:
+                row[name] = _predict(folder / "video.mp4", options, truth, camera, args.search)
+            if args.true_masks:
+                shutil.rmtree(masks_dir)
         rows.append(row)
         print(json.dumps(row), flush=True)
     _report(rows)
@@ -347,15 +438,24 @@ def measure(args) -> None:
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 
 
-def _predict(video: Path, options: dict, truth: dict, camera) -> dict:
-    """``predict --no-refine`` on ``video``: the initial velocity in the camera's axes (the
-    camera it used, and the true one) or the refusal."""
+def _squash(masks: torch.Tensor, contact: int | None) -> float | None:
+    """The true silhouette's least height after the first touch over its height in frame 0
+    (rows, perspective aside): how much the video shows the object give."""
+    rows = (masks > 0.5).any(2)  # [T, H]
+    heights = [int(r.nonzero().max() - r.nonzero().min()) + 1 for r in rows]
+    return None if contact is None else min(heights[contact:]) / heights[0]
+
+
+def _predict(video: Path, options: dict, truth: dict, camera, search: bool = False) -> dict:
+    """``predict --no-refine`` on ``video`` (``search``: predict's default path, the physics
+    fitted to the recording): the initial velocity in the camera's axes (the camera it used,
+    and the true one) and the attributes, or the refusal."""
     import reconphys
     from reconphys.errors import InputError
 
     tic = time.perf_counter()
     try:
-        result = reconphys.predict(video, refine=False, **options)
+        result = reconphys.predict(video, refine=search, **options)
     except InputError as e:
         return {"refused": str(e)}
     velocity = torch.tensor(result.details["initial_velocity"]["linear_m_s"]).double()
@@ -367,8 +467,16 @@ def _predict(video: Path, options: dict, truth: dict, camera) -> dict:
         "true_velocity_camera_m_s": (camera.world_to_cam[:3, :3].double() @ true).tolist(),
         "at_rest": result.details["initial_velocity"]["released_from_rest"],
         "observables": result.observables,
+        "search": search,
         "seconds": time.perf_counter() - tic,
     }
+
+
+PREDICT_RUNS = (
+    ("predict", "mp4 alone"),
+    ("predict_camera_file", "mp4 + camera file"),
+    ("predict_true_masks", "mp4 + the engine's masks + camera file"),
+)
 
 
 def _report(rows: list[dict]) -> None:
@@ -392,15 +500,62 @@ def _report(rows: list[dict]) -> None:
             f"cm (median {np.median(ground):.1f}, <= 2 cm: {(ground <= 2).mean():.0%}); "
             f"refused {len(rows) - len(good)}"
         )
-    for key, label in (("predict", "mp4 alone"), ("predict_camera_file", "mp4 + camera file")):
+    for key, label in PREDICT_RUNS:
         _report_predict(rows, key, label)
+    if any("springs" in r for r in rows):
+        _report_springs(rows)
+
+
+def _report_springs(rows: list[dict]) -> None:
+    """Deformable drops: does the physics order the engine's springs? Spearman's ρ of the
+    log k/m and log d/m read against pybullet's log(stiffness / mass) and log(damping / mass),
+    over all clips and within each mesh (a mesh's node count sets how a spring's stiffness
+    shows, so only the order within a mesh is like for like); beside it, the ρ of the true
+    silhouette's squash (a reference: how much the videos show the stiffness)."""
+    from scipy.stats import spearmanr
+
+    soft = [r for r in rows if "springs" in r]
+    truth = {
+        "log_k_over_m": lambda r: math.log(r["springs"]["stiffness"] / r["mass_kg"]),
+        "log_d_over_m": lambda r: math.log(r["springs"]["damping"] / r["mass_kg"]),
+    }
+
+    def rho(pairs):  # [(truth, read)] → (ρ over all, mean ρ within meshes with 4+ clips, n)
+        whole = spearmanr([a for _, a, _ in pairs], [b for _, _, b in pairs]).statistic
+        meshes = {m for m, _, _ in pairs}
+        within = [
+            spearmanr([a for n, a, _ in pairs if n == m], [b for n, _, b in pairs if n == m])
+            for m in meshes
+            if sum(n == m for n, _, _ in pairs) >= 4
+        ]
+        inside = np.nanmean([w.statistic for w in within]) if within else float("nan")
+        return whole, inside, len(pairs)
+
+    seen = [(r["object"], truth["log_k_over_m"](r), r["squash"]) for r in soft if r["squash"]]
+    whole, inside, n = rho(seen)
+    print(
+        f"deformable drops: {len(soft)}; the true silhouette's squash against log k/m: "
+        f"rho {whole:.2f} over all, {inside:.2f} within meshes ({n} clips; 1: the stiffer keeps "
+        "more of its height, always)"
+    )
+    for key, label in PREDICT_RUNS:
+        answered = [r for r in soft if key in r and "refused" not in r[key]]
+        if not answered:
+            continue
+        line = f"  {label}: {len(answered)}/{len(soft)} answered;"
+        for name, value in truth.items():
+            pairs = [(r["object"], value(r), r[key]["observables"][name]) for r in answered]
+            whole, inside, _ = rho(pairs)
+            line += f" {name} rho {whole:.2f} over all, {inside:.2f} within meshes;"
+        print(line)
 
 
 def _report_predict(rows: list[dict], key: str, what: str) -> None:
     predicted = [r for r in rows if key in r]
     if predicted:
         answered = [r for r in predicted if "refused" not in r[key]]
-        print(f"predict --no-refine, {what}: {len(answered)}/{len(predicted)} answered")
+        how = "predict" if any(r[key].get("search") for r in answered) else "predict --no-refine"
+        print(f"{how}, {what}: {len(answered)}/{len(predicted)} answered")
         for label, keep in (("from rest", True), ("moving", False)):
             chosen = [r[key] for r in answered if r["from_rest"] == keep]
             if not chosen:
@@ -421,7 +576,7 @@ def _report_predict(rows: list[dict], key: str, what: str) -> None:
             print(line)
         seconds = [r[key]["seconds"] for r in answered]
         if seconds:
-            print(f"  {np.mean(seconds):.1f} s a clip (predict, no refine)")
+            print(f"  {np.mean(seconds):.1f} s a clip")
 
 
 def main() -> None:
@@ -433,6 +588,11 @@ def main() -> None:
     make.add_argument("--seed", type=int, default=0)
     make.add_argument("--size", default="128x128", help="WIDTHxHEIGHT pixels")
     make.add_argument(
+        "--soft",
+        action="store_true",
+        help="deformable (mass-spring) drops from rest of SOFT_MESHES instead of --meshes",
+    )
+    make.add_argument(
         "--meshes",
         default=TEST_MESHES,
         help="a pybullet dataset whose test split's meshes to drop (default: data/pyb's, held "
@@ -442,6 +602,16 @@ def main() -> None:
     read.add_argument("out")
     read.add_argument("--limit", type=int, default=None)
     read.add_argument("--no-predict", action="store_true", help="the front end only")
+    read.add_argument(
+        "--true-masks",
+        action="store_true",
+        help="also predict with the engine's masks (--masks) and the camera file",
+    )
+    read.add_argument(
+        "--search",
+        action="store_true",
+        help="predict's default path (the physics fitted to the recording), not --no-refine",
+    )
     read.add_argument("--segmenter", default=None, help="weights (default: the shipped ones)")
     read.add_argument("--json", default=None, help="write the per-clip rows here")
     args = parser.parse_args()
