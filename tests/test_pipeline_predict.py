@@ -580,8 +580,10 @@ def test_first_frames_agreement():
         ({"K": [[40, 0, 16], [0, 40, 16]]}, "[K]: expected shape [3, 3]"),
         ({"world_to_cam": [[1, 0, 0, 0]] * 4}, "[world_to_cam]: its 3×3 block is not a rotation"),
         ({"width": -3}, "[width]: expected a positive integer"),
+        ({"K": [[1000, 0, 960], [0, 1000, 540], [0, 0, 1]]},  # a 1080p camera's, size not given
+         "[K]: its principal point (960, 540) is outside the 32×32 image"),
     ],
-)
+)  # fmt: skip
 def test_camera_file_with_wrong_shapes(bundle, tmp_path, change, expected):
     camera = json.loads((bundle / "camera.json").read_text())
     camera.update(change)

@@ -123,6 +123,14 @@ def read_camera(path: str | os.PathLike, width: int, height: int) -> CameraSpec:
         if not isinstance(value, int) or value < 1:
             raise InputError(f"expected a positive integer, got {value!r}", source, key)
         size.append(value)
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    if not (0 < cx < size[0] and 0 < cy < size[1]):
+        raise InputError(
+            f"its principal point ({cx:g}, {cy:g}) is outside the {size[0]}×{size[1]} image: "
+            "K was made for another image size; give that size as width and height",
+            source,
+            "K",
+        )
     ground = data.get("ground_height", 0.0)
     if not isinstance(ground, (int, float)) or not math.isfinite(ground):
         raise InputError(f"expected a number in metres, got {ground!r}", source, "ground_height")
