@@ -116,15 +116,9 @@ def object_distance(observation: Observation) -> tuple[float, str]:
     if fall is not None and not misread:
         distance, how = fall, "fall"
     elif rest is not None:
-        distance, how = (
-            rest,
-            "rest on the ground"
-            + (
-                ""
-                if fall is None
-                else f" (the fall read {fall:.3g} m: more than ×{FALL_REST_AGREEMENT:g} off)"
-            ),
-        )
+        distance, how = rest, "rest on the ground"
+        if fall is not None:
+            how += f" (the fall read {fall:.3g} m: more than ×{FALL_REST_AGREEMENT:g} off)"
     else:
         raise InputError(
             "cannot tell how far the object is (no free fall in the first frames and the resting "
