@@ -537,10 +537,29 @@ def test_plain_datasets_keep_their_fingerprint_and_scene_is_checked():
     )
     with pytest.raises(InputError, match="--vivid-share"):
         make_settings(scene="realistic", vivid_share=1.5)
+    with pytest.raises(InputError, match="--contrast-share"):
+        make_settings(scene="realistic", contrast_share=-0.1)
     with pytest.raises(InputError, match="--scene"):
         make_settings(scene="studio")
     with pytest.raises(InputError, match="object_size_range"):
         make_settings(scene="realistic", object_size_range=(0.5, 0.1))
+
+
+def test_contrast_share_changes_only_the_floor():
+    """--contrast-share draws from a stream of its own, after the vivid draw: about the share
+    asked of the scenes get a high-contrast floor, and nothing else of a seed's scene moves."""
+    from reconphys.data.scene import draw_scene
+
+    vivid = replace(SMALL, scene="realistic", resolution=32, vivid_share=0.5)
+    both = replace(vivid, contrast_share=0.5)
+    drawn = [
+        (draw_scene(vivid, f"object-{i}", 0), draw_scene(both, f"object-{i}", 0)) for i in range(80)
+    ]
+    changed = [a.look != b.look for a, b in drawn]
+    assert 0.3 < np.mean(changed) < 0.7
+    for a, b in drawn:
+        floor = {"ground_pattern": a.look.ground_pattern, "ground_colors": a.look.ground_colors}
+        assert replace(b, look=replace(b.look, **floor)) == a
 
 
 def test_vivid_share_changes_only_the_look_and_the_asset_carries_its_print(tmp_path):

@@ -5,6 +5,7 @@ analytic footprint, Lambert's law, PSNR)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,10 +14,12 @@ import torch
 from reconphys.assets.gaussians import Gaussians
 from reconphys.render import dataset_views
 from reconphys.render.scene import (
+    CONTRAST_GROUND_PATTERNS,
     OBJECT_PATTERNS,
     VIVID_GROUND_PATTERNS,
     add_sensor_noise,
     composite_in_scene,
+    contrast_look,
     draw_look,
     pixel_rays,
     print_pattern,
@@ -169,6 +172,25 @@ def test_a_vivid_look_is_saturated_where_the_muted_one_never_is():
     assert {v.object_pattern for v in vivid} == set(OBJECT_PATTERNS)
     assert all(v.light_direction == m.light_direction for v, m in zip(vivid, muted, strict=True))
     assert all(v.noise_sigma == m.noise_sigma for v, m in zip(vivid, muted, strict=True))
+
+
+def test_a_contrast_floor_is_dark_and_bright_where_the_muted_one_never_is():
+    """The high-contrast look (data's contrast_share) gives the floor a dark and a bright colour:
+    their brightest channels ×2.4 apart or more, where the muted look's second colour is a copy
+    of the first darkened ×0.5–0.85 (×2 at most); only the floor changes."""
+    rng = np.random.default_rng(2)
+    muted = [draw_look(rng, (0.0, 0.02)) for _ in range(200)]
+    contrast = [contrast_look(rng, m) for m in muted]
+
+    def ratio(colours) -> float:  # brightest channel of the brighter over the darker's
+        values = sorted(max(c) for c in colours)
+        return values[-1] / max(values[0], 1e-6)
+
+    assert max(ratio(m.ground_colors) for m in muted) <= 2.0 + 1e-6
+    assert min(ratio(c.ground_colors) for c in contrast) >= 2.4
+    assert {c.ground_pattern for c in contrast} == set(CONTRAST_GROUND_PATTERNS)
+    for c, m in zip(contrast, muted, strict=True):
+        assert replace(c, ground_pattern=m.ground_pattern, ground_colors=m.ground_colors) == m
 
 
 @pytest.mark.parametrize("pattern", OBJECT_PATTERNS[1:])

@@ -41,6 +41,7 @@ SETTINGS_OPTIONS = {
     "objaverse_uids": "objaverse_uids",
     "stretch": "stretch_range",
     "vivid_share": "vivid_share",
+    "contrast_share": "contrast_share",
 }
 
 
@@ -83,6 +84,11 @@ def make_data(
         None,
         help="Realistic look only: the share of scenes drawn vivid (saturated many-coloured "
         "floors and backdrops, a printed pattern on the object; default 0).",
+    ),
+    contrast_share: float = typer.Option(
+        None,
+        help="Realistic look only: the share of scenes whose floor is high-contrast (a dark and "
+        "a bright colour in checkers, tiles or blobs, as an engine's default floor; default 0).",
     ),
     stretch: float = typer.Option(
         None,

@@ -18,7 +18,7 @@ import torch
 
 from ..assets.gaussians import SH_C0
 from ..render import Cameras, intrinsics_from_fov, look_at
-from ..render.scene import SceneLook, draw_look, print_pattern, vivid_look
+from ..render.scene import SceneLook, contrast_look, draw_look, print_pattern, vivid_look
 from .objects import CanonicalObject
 from .sampling import sample_seed
 from .settings import DataSettings
@@ -26,6 +26,7 @@ from .settings import DataSettings
 MIN_CAMERA_HEIGHT = 0.05  # metres above the ground
 SCENE_STREAM = 1  # the realistic look's random stream, beside the sample's own (0)
 VIVID_STREAM = 2  # whether and how a scene is vivid (settings.vivid_share): a stream of its own
+CONTRAST_STREAM = 3  # whether and how its floor is high-contrast (settings.contrast_share)
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,10 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         vivid = np.random.default_rng([seed, VIVID_STREAM])
         if vivid.random() < settings.vivid_share:
             look = vivid_look(vivid, look, size)
+    if settings.contrast_share > 0:
+        contrast = np.random.default_rng([seed, CONTRAST_STREAM])
+        if contrast.random() < settings.contrast_share:
+            look = contrast_look(contrast, look)
     return SceneSpec(
         size=size,
         look=look,

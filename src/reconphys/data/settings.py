@@ -30,6 +30,7 @@ SCENE_FIELDS = (
     "noise_range",
     "video_quality_range",
     "vivid_share",
+    "contrast_share",
 )
 
 
@@ -90,6 +91,9 @@ class DataSettings:
     # floors and backdrops, a printed pattern on the object), from a random stream of its own:
     # at 0 every scene is drawn as before
     vivid_share: float = 0.0
+    # Share of realistic scenes whose floor is high-contrast (render/scene.py contrast_look: an
+    # engine's checker floor, dark and bright), after the vivid draw, from a stream of its own
+    contrast_share: float = 0.0
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -116,6 +120,8 @@ class DataSettings:
             values.pop("stretch_range")
         if self.scene != "plain" and not self.vivid_share:  # nor before the vivid look
             values.pop("vivid_share")
+        if self.scene != "plain" and not self.contrast_share:  # nor before the contrast look
+            values.pop("contrast_share")
         text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -207,6 +213,9 @@ class DataSettings:
                 )
         if not (isinstance(self.vivid_share, (int, float)) and 0 <= self.vivid_share <= 1):
             raise InputError(f"must be in [0, 1], got {self.vivid_share!r}", field="--vivid-share")
+        share = self.contrast_share
+        if not (isinstance(share, (int, float)) and 0 <= share <= 1):
+            raise InputError(f"must be in [0, 1], got {share!r}", field="--contrast-share")
         first, last = self.contact_frame_range
         if not (0 < first <= last < self.num_frames - 1):
             raise InputError(

@@ -30,6 +30,9 @@ GROUND_PATTERNS = ("checker", "stripes", "tiles", "noise")
 # the vivid look's (vivid_look): also "patches", blobs of three to five colours (a play mat, a rug)
 VIVID_GROUND_PATTERNS = (*GROUND_PATTERNS, "patches")
 OBJECT_PATTERNS = ("none", "checker", "stripes", "patches")  # printed on the object (vivid)
+# the high-contrast look's floors (contrast_look): a simulator's checker floor or tiles, dark and
+# bright, or blobs of the two (drawn with these weights)
+CONTRAST_GROUND_PATTERNS = {"checker": 0.6, "tiles": 0.2, "patches": 0.2}
 NOISE_GRID = 16  # cells of the periodic value-noise textures
 FOG_DISTANCE = 12.0  # metres: the ground fades into the horizon colour beyond this
 SHADOW_GRID = 64  # cells per side of the shadow map around the object's footprint
@@ -119,6 +122,24 @@ def vivid_look(rng: np.random.Generator, look: SceneLook, size: float) -> SceneL
         object_period=float(size * rng.uniform(0.15, 0.6)),
         object_mix=float(rng.uniform(0.5, 1.0)),
     )
+
+
+def contrast_look(rng: np.random.Generator, look: SceneLook) -> SceneLook:
+    """``look`` with a high-contrast floor (what an engine's default scene shows: a checker floor
+    of a dark and a bright colour, several times the muted look's contrast): one colour of value
+    0–0.25, the other 0.6–1, each of any hue, at most half-saturated when bright, in one of
+    CONTRAST_GROUND_PATTERNS. The rest of the scene stays."""
+
+    def hsv(value: tuple[float, float], saturation: float) -> tuple[float, float, float]:
+        hue, sat, val = rng.uniform(), rng.uniform(0.0, saturation), rng.uniform(*value)
+        return colorsys.hsv_to_rgb(float(hue), float(sat), float(val))
+
+    names, weights = zip(*CONTRAST_GROUND_PATTERNS.items(), strict=True)
+    pattern = str(rng.choice(names, p=np.array(weights) / sum(weights)))
+    colours = [hsv((0.0, 0.25), 1.0), hsv((0.6, 1.0), 0.5)]
+    if rng.random() < 0.5:
+        colours.reverse()
+    return replace(look, ground_pattern=pattern, ground_colors=tuple(colours))
 
 
 def _palette(blend: Tensor, colours: Tensor) -> Tensor:
