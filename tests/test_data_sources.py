@@ -157,7 +157,13 @@ def test_stretch_leaves_older_datasets_fingerprints_alone():
     values.pop("stretch_range")
     for name in ("scene", "object_size_range", "fov_range_deg", "elevation_range_deg"):
         values.pop(name)
-    for name in ("framing_range", "noise_range", "video_quality_range", "vivid_share"):
+    for name in (
+        "framing_range",
+        "noise_range",
+        "video_quality_range",
+        "vivid_share",
+        "contrast_share",
+    ):
         values.pop(name)
     text = json.dumps(values, sort_keys=True)
     assert settings.fingerprint() == hashlib.sha256(text.encode()).hexdigest()[:16]
