@@ -118,10 +118,9 @@ class DataSettings:
                 values.pop(name)
         if not self.stretched:  # datasets made before the stretch existed keep theirs
             values.pop("stretch_range")
-        if self.scene != "plain" and not self.vivid_share:  # nor before the vivid look
-            values.pop("vivid_share")
-        if self.scene != "plain" and not self.contrast_share:  # nor before the contrast look
-            values.pop("contrast_share")
+        for name in ("vivid_share", "contrast_share"):  # nor before the vivid, contrast looks
+            if self.scene != "plain" and not getattr(self, name):
+                values.pop(name)
         text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -211,11 +210,10 @@ class DataSettings:
                 raise InputError(
                     f"[{low}, {high}] must satisfy {lowest} ≤ low ≤ high ≤ {highest}", field=name
                 )
-        if not (isinstance(self.vivid_share, (int, float)) and 0 <= self.vivid_share <= 1):
-            raise InputError(f"must be in [0, 1], got {self.vivid_share!r}", field="--vivid-share")
-        share = self.contrast_share
-        if not (isinstance(share, (int, float)) and 0 <= share <= 1):
-            raise InputError(f"must be in [0, 1], got {share!r}", field="--contrast-share")
+        for name in ("vivid_share", "contrast_share"):
+            share = getattr(self, name)
+            if not (isinstance(share, (int, float)) and 0 <= share <= 1):
+                raise InputError(f"must be in [0, 1], got {share!r}", field=f"--{name[:-6]}-share")
         first, last = self.contact_frame_range
         if not (0 < first <= last < self.num_frames - 1):
             raise InputError(
