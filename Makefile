@@ -120,12 +120,12 @@ masks-model: install
 	$(BIN)/reconphys make-data --source procedural --scene realistic --objects 80 \
 	    --samples-per-object 2 --test-objects 0 --resolution 96 --seed 7 --workers 2 \
 	    --out data/seg_proc
-	$(BIN)/reconphys make-data --source pybullet --scene realistic --vivid-share 1 --objects 60 \
-	    --samples-per-object 2 --test-objects 0 --resolution 96 --seed 103 --workers 2 \
-	    --out data/seg_vivid_pyb
+	$(BIN)/reconphys make-data --source pybullet --scene realistic --vivid-share 1 \
+	    --contrast-share 0.5 --objects 60 --samples-per-object 2 --test-objects 0 \
+	    --resolution 96 --seed 103 --workers 2 --out data/seg_vivid_pyb
 	$(BIN)/reconphys make-data --source procedural --scene realistic --vivid-share 1 \
-	    --objects 80 --samples-per-object 2 --test-objects 0 --resolution 96 --seed 107 \
-	    --workers 2 --out data/seg_vivid_proc
+	    --contrast-share 0.5 --objects 80 --samples-per-object 2 --test-objects 0 \
+	    --resolution 96 --seed 107 --workers 2 --out data/seg_vivid_proc
 	$(BIN)/reconphys train-masks --data data/seg_pyb --data data/seg_proc \
 	    --data data/seg_vivid_pyb --data data/seg_vivid_proc \
 	    --exclude configs/masks_held_out.txt --out runs/masks --steps 8000 --no-progress

@@ -187,6 +187,35 @@ def test_train_masks_writes_a_loadable_model_and_refuses_plain_data(tmp_path):
         assert result.exit_code != 0 and "--channels" in result.output
 
 
+def test_train_masks_init_starts_from_the_given_weights(tmp_path):
+    """--init: the run starts from a trained segmenter's weights (at a vanishing learning rate it
+    ends there) where without it the seed's draw is the start; another width is refused, and a
+    run without --init records its settings as before (older checkpoints still resume)."""
+    data = tmp_path / "data"
+    make_dataset(replace(REALISTIC, resolution=24, test_objects=0, objects=1), data, workers=1)
+    command = ["train-masks", "--data", str(data), "--steps", "2", "--batch-size", "2"]
+    command += ["--crop", "16", "--threads", "1", "--no-progress", "--channels", "8,12"]
+    start, tuned, fresh = tmp_path / "start", tmp_path / "tuned", tmp_path / "fresh"
+    result = runner.invoke(app, [*command, "--out", str(start), "--seed", "5"])
+    assert result.exit_code == 0, result.output
+    slow = ["--lr", "1e-12"]
+    result = runner.invoke(app, [*command, *slow, "--out", str(tuned), "--init", str(start)])
+    assert result.exit_code == 0, result.output
+    assert runner.invoke(app, [*command, *slow, "--out", str(fresh)]).exit_code == 0
+    a, b, c = (load_mask_segmenter(p).state_dict() for p in (start, tuned, fresh))
+    assert all(torch.allclose(a[k], b[k], atol=1e-6) for k in a)
+    assert not all(torch.allclose(a[k], c[k], atol=1e-3) for k in a)
+    recorded = [
+        json.loads((p / "model.json").read_text())["training"]["settings"] for p in (tuned, fresh)
+    ]
+    assert recorded[0]["init"] == str(start) and "init" not in recorded[1]
+    wide = [*command[:-1], "8,16", "--out", str(tmp_path / "wide"), "--init", str(start)]
+    result = runner.invoke(app, wide)
+    assert result.exit_code != 0 and "give --channels 8,12" in result.output
+    result = runner.invoke(app, [*command, "--out", str(tmp_path / "x"), "--init", str(data)])
+    assert result.exit_code != 0 and "mask segmenter not found" in result.output
+
+
 def test_load_clips_reads_some_views_and_leaves_held_out_meshes_out(tmp_path):
     """--views-per-sample N: sample i gives views i … i + N − 1 (mod 4); --exclude FOLDER: no
     clip of a mesh in FOLDER's test split (a validation or test set stays held out)."""

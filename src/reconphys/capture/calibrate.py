@@ -75,6 +75,10 @@ Z_10_90 = NormalDist().inv_cdf(0.9)  # 1.2816
 # A fall read as an object this many metres across is not a fall: masks that do not follow the
 # object (a segmenter's on a scene it does not know) can imply one kilometres away
 MAX_READ_SIZE_M = 3.0
+# A size whose 10–90 % interval reaches beyond this factor either way is not read: the fall
+# shown is too short or its masks too noisy (a clip that starts just before the landing); the
+# validation drops of this look never went past ×2.6 (docs/usage.md, camera and ground)
+MAX_SIZE_FACTOR = 3.0
 
 
 @dataclass
@@ -463,7 +467,7 @@ def estimate_camera(
     world_to_cam = world_to_cam.clone()
     world_to_cam[:3, 3] = world_to_cam[:3, 3] + rotation @ shift
     camera = CameraSpec(K, world_to_cam, width_px, height_px, 0.0, "estimated from the video")
-    return CameraEstimate(
+    estimate = CameraEstimate(
         camera=camera,
         fov_deg=fov,
         pitch_deg=math.degrees(pitch),
@@ -474,3 +478,12 @@ def estimate_camera(
         contact_s=contact,
         scale_spread=math.hypot(SCALE_ERROR_FACTOR * depth_error, SCALE_ERROR_FLOOR),
     )
+    low, high = estimate.size_factor_10_90
+    if not high <= MAX_SIZE_FACTOR:
+        raise InputError(
+            f"the fall shown ({count} frames) reads the object's size only to ×{low:.2f}–"
+            f"×{high:.3g} (wider than ×{MAX_SIZE_FACTOR:g} either way): too short or too noisy a "
+            "fall to read the scale from; give the camera with --camera FILE",
+            source="camera from the video",
+        )
+    return estimate

@@ -150,6 +150,9 @@ def train_masks(
     channels: str = typer.Option(
         "24,32,48,64", help="The U-Net's channels per level, comma-separated (multiples of 4)."
     ),
+    init: Path = typer.Option(
+        None, help="Start from this trained segmenter (.safetensors or a train-masks folder)."
+    ),
     threads: int = typer.Option(2, help="CPU threads (torch)."),
     no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
 ):
@@ -193,6 +196,7 @@ def train_masks(
         exclude=tuple(str(d) for d in exclude),
         views_per_sample=views_per_sample,
         channels=widths,
+        init="" if init is None else str(init),
     )
     set_cpu_threads(threads)
     path = train_mask_segmenter(settings, progress=not no_progress, log=typer.echo)

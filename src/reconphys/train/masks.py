@@ -9,7 +9,8 @@ the data were rendered at), a random ``crop``² window (smaller frames are used 
 horizontal mirror (never a vertical one: objects fall downwards), and minimises binary cross
 entropy + soft Dice against the stored mask. The run writes ``OUT/model.safetensors`` +
 ``model.json``, ``OUT/log.jsonl``, and a checkpoint every ``checkpoint_every`` steps; running the
-same command again resumes it.
+same command again resumes it. ``init`` starts from a trained segmenter's weights instead of a
+random draw (fine-tuning it on other data, with the same schedule).
 """
 
 from __future__ import annotations
@@ -58,6 +59,15 @@ class MaskTrainSettings:
     exclude: tuple[str, ...] = ()  # meshes left out: a folder's test split's, or a list file
     views_per_sample: int = 4  # sample i gives views i, i + 1, … (mod 4): more meshes per GB
     channels: tuple[int, ...] = SegmenterConfig().channels  # the U-Net's width per level
+    init: str = ""  # a trained segmenter (.safetensors or a run's folder) to start from; "": random
+
+
+def _recorded(settings: MaskTrainSettings) -> dict:
+    """The settings a checkpoint records: ``init`` only when given (older runs still resume)."""
+    recorded = asdict(settings)
+    if not recorded["init"]:
+        recorded.pop("init")
+    return recorded
 
 
 @dataclass
@@ -163,9 +173,18 @@ def train_mask_segmenter(settings: MaskTrainSettings, progress: bool = True, log
     )
     torch.manual_seed(settings.seed)
     model = MaskSegmenter(SegmenterConfig(channels=tuple(settings.channels)))
+    if settings.init:
+        start = load_mask_segmenter(settings.init)
+        if start.config.channels != model.config.channels:
+            widths = ",".join(map(str, start.config.channels))
+            raise InputError(
+                f"its network's channels are {widths}: give --channels {widths}",
+                source=settings.init,
+            )
+        model.load_state_dict(start.state_dict())
     optimizer = torch.optim.AdamW(model.parameters(), lr=settings.lr, weight_decay=1e-4)
     checkpoint = out / CHECKPOINT
-    first = resume_step(checkpoint, model, optimizer, asdict(settings), log)
+    first = resume_step(checkpoint, model, optimizer, _recorded(settings), log)
     out.mkdir(parents=True, exist_ok=True)
     steps = range(first, settings.steps + 1)
     if progress:
@@ -192,11 +211,11 @@ def train_mask_segmenter(settings: MaskTrainSettings, progress: bool = True, log
         if progress:
             steps.set_postfix(loss=f"{loss.item():.3f}")
         if step % settings.checkpoint_every == 0 or step == settings.steps:
-            save_step(checkpoint, model, optimizer, step, asdict(settings))
+            save_step(checkpoint, model, optimizer, step, _recorded(settings))
     training = {
         "data": [str(Path(d).resolve()) for d in settings.data],
         "clips": len(clips),
-        "settings": asdict(settings),
+        "settings": _recorded(settings),
         "wall_clock_seconds_last_session": round(time.perf_counter() - started, 1),
         "final_loss": loss.item(),
     }
