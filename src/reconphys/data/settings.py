@@ -213,7 +213,8 @@ class DataSettings:
         for name in ("vivid_share", "contrast_share"):
             share = getattr(self, name)
             if not (isinstance(share, (int, float)) and 0 <= share <= 1):
-                raise InputError(f"must be in [0, 1], got {share!r}", field=f"--{name[:-6]}-share")
+                flag = "--" + name.replace("_", "-")
+                raise InputError(f"must be in [0, 1], got {share!r}", field=flag)
         first, last = self.contact_frame_range
         if not (0 < first <= last < self.num_frames - 1):
             raise InputError(

@@ -168,12 +168,9 @@ def mask_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 def train_mask_segmenter(settings: MaskTrainSettings, progress: bool = True, log=print) -> Path:
     out = Path(settings.out)
-    clips = load_clips(
-        settings.data, "train", progress, settings.exclude, settings.views_per_sample
-    )
     torch.manual_seed(settings.seed)
     model = MaskSegmenter(SegmenterConfig(channels=tuple(settings.channels)))
-    if settings.init:
+    if settings.init:  # before the data are read: a wrong --init fails at once
         start = load_mask_segmenter(settings.init)
         if start.config.channels != model.config.channels:
             widths = ",".join(map(str, start.config.channels))
@@ -182,6 +179,9 @@ def train_mask_segmenter(settings: MaskTrainSettings, progress: bool = True, log
                 source=settings.init,
             )
         model.load_state_dict(start.state_dict())
+    clips = load_clips(
+        settings.data, "train", progress, settings.exclude, settings.views_per_sample
+    )
     optimizer = torch.optim.AdamW(model.parameters(), lr=settings.lr, weight_decay=1e-4)
     checkpoint = out / CHECKPOINT
     first = resume_step(checkpoint, model, optimizer, _recorded(settings), log)
