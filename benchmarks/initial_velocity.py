@@ -5,11 +5,11 @@ For view 0 of every test sample of a dataset: the sample's true Gaussians at fra
 camera (what `predict --gaussians --camera` gives the fit), the masks a user gets (the plain
 look: background subtraction by the border colour, as predict; the realistic look: the stored
 true masks and, with --segmenter, the mask segmenter's), and
-capture.placement.linear_velocity_fit over frames 0–3 with its test for a release from rest
-(predict's rule, placement.REST_CHI2), without that test (the rule before 2026-11-27) and,
-measured and not kept (docs/usage.md), over a longer window of the free fall
-(calibrate.fall_frames less 2 frames: it reads a frame or two past the touch) with a 1-px
-noise floor. Printed per launch
+capture.placement.linear_velocity_fit as predict reads it (since 2026-11-28: the test for a
+release from rest on frames 0–3, placement.REST_CHI2, then a clip not at rest read again over
+the free fall, calibrate.fall_frames less 2 frames, with a 1-px noise floor), over frames 0–3
+only (the rule before 2026-11-28), without the rest test (before 2026-11-27) and over the fall
+without the rest test (measured and not kept, docs/usage.md). Printed per launch
 (drops, tosses, released from rest): the mean |error| in the camera's axes (x right, y down,
 along the view), the largest speed read for clips released from rest, and how often ± 1.2816
 standard errors held the truth (the fit's own; predict widens it by the size's error when the
@@ -42,8 +42,14 @@ from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
 
 NOISE, CHI2 = placement.VELOCITY_NOISE_PX, placement.REST_CHI2  # predict's
-RULES = {  # name: (frames: "four" or "fall", the noise floor in pixels, frames less, χ²)
-    "predict: frames 0-3, the rest test": ("four", NOISE, 0, CHI2),
+RULES = {  # name: (frames: "four", "fall" or "gated" (predict's), noise floor px, frames less, χ²)
+    "predict: the rest test on frames 0-3, then the fall less 2 frames (1 px)": (
+        "gated",
+        NOISE,
+        0,
+        CHI2,
+    ),
+    "before 2026-11-28: frames 0-3, the rest test": ("four", NOISE, 0, CHI2),
     "before 2026-11-27: no rest test": ("four", NOISE, 0, 0.0),
     "the fall less 2 frames, 1 px, no rest test (not kept)": ("fall", 1.0, 2, 0.0),
 }
@@ -91,10 +97,17 @@ def main() -> None:
             fall = FOUR
         for name, (which, floor, less, chi2) in RULES.items():
             placement.VELOCITY_NOISE_PX, placement.REST_CHI2 = floor, chi2
-            used = FOUR if which == "four" else max(FOUR, fall - less)
+            used = FOUR if which != "fall" else max(FOUR, fall - less)
             velocity, error = placement.linear_velocity_fit(
-                means, masks, camera, float(meta["frame_dt"]), used
+                means,
+                masks,
+                camera,
+                float(meta["frame_dt"]),
+                used,
+                fall=fall if which == "gated" else None,
             )
+            if which == "gated" and velocity.any():
+                used = max(FOUR, fall - placement.FALL_WINDOW_LESS)
             off = (rotation @ (velocity.double() - truth)).abs()
             held = off <= Z_10_90 * error.double()
             speed = float(velocity.norm())

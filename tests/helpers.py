@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 
@@ -79,3 +80,14 @@ def train_tiny_gaussian_predictor(data, out, steps: int = 1, split: str = "test"
         predictor={"channels": [8, 16]},
     )
     return train_gaussian_predictor(settings, progress=False, log=lambda line: None)
+
+
+def rim_noise(masks: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
+    """Masks [T, H, W] that gain or lose a pixel's rim on one side at random per frame (as the
+    mask segmenter's do)."""
+    noisy = []
+    for mask in masks.numpy() > 0.5:
+        axis, step = [(0, 1), (0, -1), (1, 1), (1, -1)][rng.integers(4)]
+        moved = np.roll(mask, step, axis=axis)
+        noisy.append(mask | moved if rng.uniform() < 0.5 else mask & moved)
+    return torch.from_numpy(np.stack(noisy)).float()

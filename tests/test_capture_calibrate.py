@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from helpers import rim_noise
 
 from reconphys.capture.calibrate import estimate_camera
 from reconphys.capture.masks import release_time
@@ -154,17 +155,6 @@ def test_a_wrong_focal_length_moves_the_camera_not_the_object():
     size_right = right.distance / f_right  # metres per pixel at the object
     size_wrong = wrong.distance / f_wrong
     assert size_wrong == pytest.approx(size_right, rel=0.05)
-
-
-def rim_noise(masks: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
-    """Masks [T, H, W] that gain or lose a pixel's rim on one side at random per frame (as the
-    mask segmenter's do)."""
-    noisy = []
-    for mask in masks.numpy() > 0.5:
-        axis, step = [(0, 1), (0, -1), (1, 1), (1, -1)][rng.integers(4)]
-        moved = np.roll(mask, step, axis=axis)
-        noisy.append(mask | moved if rng.uniform() < 0.5 else mask & moved)
-    return torch.from_numpy(np.stack(noisy)).float()
 
 
 def test_masks_that_make_the_object_metres_across_are_refused():

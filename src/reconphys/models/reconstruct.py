@@ -21,6 +21,8 @@ from ..capture import Observation
 from ..capture.calibrate import (
     CAMERA_CONVENTION,
     MAX_READ_SIZE_M,
+    fall_frames,
+    mask_track,
     object_depth,
     rest_depth,
 )
@@ -38,8 +40,24 @@ def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tupl
     """(velocity [3] m/s world frame, its standard error [3] m/s along the camera's x right,
     y down and viewing axes) from the masks' free fall (capture.placement.linear_velocity_fit)."""
     return linear_velocity_fit(
-        gaussians.means, observation.masks, observation.camera, observation.frame_dt
+        gaussians.means,
+        observation.masks,
+        observation.camera,
+        observation.frame_dt,
+        fall=observed_fall_frames(observation),
     )
+
+
+def observed_fall_frames(observation: Observation) -> int | None:
+    """Frames of free fall the masks show from frame 0 (calibrate.fall_frames; the camera
+    estimate's when the camera was read from the video), None when they cannot be read."""
+    if observation.camera_estimate is not None:
+        return int(observation.camera_estimate["fall_frames"])
+    try:
+        track = mask_track(observation.masks)
+    except InputError:  # a frame without the object
+        return None
+    return fall_frames(track, observation.frame_dt, observation.fall_fit_px)
 
 
 def observed_asset(

@@ -169,8 +169,8 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
         lines += [
             "",
             f"Initial velocity (m/s): estimated {_vector(velocity)}, true "
-            f"{_vector(true_velocity)} (from the masks' free fall and growth over frames 0–3; "
-            "spin is not estimated).",
+            f"{_vector(true_velocity)} (from the masks' free fall and growth: frames 0–3 "
+            "decide a release from rest, the whole fall reads a motion; spin is not estimated).",
         ]
     lines += [
         "",

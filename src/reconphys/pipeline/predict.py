@@ -390,9 +390,13 @@ def predict_observation(
             "angular_rad_s": [0.0, 0.0, 0.0],
             # the masks' motion is explained without a velocity (placement.REST_CHI2)
             "released_from_rest": at_rest,
-            "how": "free fall of the mask's centroid and growth of its area over frames 0–3 "
-            "(angular velocity not estimated)"
-            + ("; at rest: no motion beyond the masks' noise" if at_rest else ""),
+            "how": "free fall of the mask's centroid and growth of its area over frames 0–3"
+            + (
+                "; at rest: no motion beyond the masks' noise"
+                if at_rest
+                else ", then again over the whole free fall where it shows more frames"
+            )
+            + " (angular velocity not estimated)",
         }
     means = placed.means if build_new else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)

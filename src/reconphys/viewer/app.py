@@ -124,6 +124,9 @@ class ViewerApp:
         self.host = host
         self._closed = threading.Event()
         self._display_thread: threading.Thread | None = None
+        # refresh() runs on the display thread and from UI callbacks: one at a time, or two
+        # could both create a grip's nodes and the second would remove the first's handles
+        self._refresh_lock = threading.RLock()
         self._armed = False  # the next click on the object makes a grip
         self._dragging: set[str] = set()  # grips whose gizmo the user is dragging
         self._grip_nodes: dict[str, dict] = {}
@@ -484,7 +487,11 @@ class ViewerApp:
             self._closed.wait(max(0.0, 1.0 / self.display_rate - (time.perf_counter() - started)))
 
     def refresh(self) -> None:
-        """Send the latest simulated state to the browsers."""
+        """Send the latest simulated state to the browsers (thread-safe)."""
+        with self._refresh_lock:
+            self._refresh()
+
+    def _refresh(self) -> None:
         if self._splats.visible:
             self._splats.centers = self.session.gaussian_means().numpy()
         if self._anchors.visible or self._spring_lines.visible:
