@@ -308,6 +308,11 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
         app, ["predict", str(video), "--out", str(tmp_path / "a3"), "--fov", "0"]
     )
     assert result.exit_code == 2 and "--fov" in result.output
+    result = runner.invoke(
+        app, ["predict", str(video), "--out", str(tmp_path / "a4"), "--touch", "hard"]
+    )
+    assert result.exit_code == 2 and "--touch" in result.output and "soft, rigid" in result.output
+    assert not (tmp_path / "a4").exists()
 
 
 def test_commands_that_read_object_on_black_refuse_a_realistic_dataset(tmp_path):

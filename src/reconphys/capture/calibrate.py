@@ -14,10 +14,12 @@ user's ``--fov``), and an object that falls freely for a few frames before it la
    follow from gravity and the pixels alone. The fit's standard error of the depth (widened,
    :data:`SCALE_ERROR_FACTOR`, :data:`SCALE_ERROR_FLOOR`) gives the size's 10–90 % interval.
 2. **Ground from the first touch.** The centroid leaves the free fall's path when the object
-   touches the ground, as ``−c·(t − t_c)²`` while the ground's push builds (:func:`contact_time`
-   fits t_c between frames). The centre's position at t_c (the fall's fit, metres) plus the
-   object's extent below its centre (frame 0's silhouette, from the centroid down to its bottom
-   edge) puts the ground: the lowest point is on it at the touch. Without a clear touch (a clip
+   touches the ground, as ``−c·(t − t_c)²`` while the ground's push builds (``touch="soft"``,
+   the default), or also ``−a·(t − t_c)`` when a rigid object stops or bounces at once
+   (``touch="rigid"``); :func:`contact_time` fits t_c between frames. The centre's position
+   at t_c (the fall's fit, metres) plus the object's extent below its centre (frame 0's
+   silhouette, from the centroid down to its bottom edge) puts the ground: the lowest point is
+   on it at the touch. Without a clear touch (a clip
    that ends first, a fall cut short by mask errors), or with ``ground_from_touch=False``, the
    ground is read from where the object rests: in the last frame its lowest silhouette point
    is on (a box's near bottom edge) or just above (a ball's) the ground, nearer than its centre
@@ -65,6 +67,12 @@ SEGMENTER_FALL_FIT_PX = 1.0
 CONTACT_FRAMES_AFTER = 2
 CONTACT_MIN_PX = 2.0
 CONTACT_MIN_G = 1.0
+# How the object meets the ground (``--touch``): "soft", a push that builds as it squashes
+# (−c·Δt²); "rigid", one that can also stop or bounce it at once (−a·Δt − c·Δt², a, c ≥ 0). A
+# quadratic reads a rigid stop ~40 ms early: on pybullet's rigid drops the ground came out 7.0
+# cm high on average with "soft", 2.9 cm off with "rigid"; on this project's squashing drops
+# "rigid" is 1–3 cm worse (docs/usage.md "A rigid object's touch is read a frame early")
+TOUCHES = ("soft", "rigid")
 # The object's size read from the fall, 10–90 %: the fit's own standard error of the depth
 # (relative) times SCALE_ERROR_FACTOR, beside SCALE_ERROR_FLOOR for what the fit does not see
 # (the field of view, the pitch, an object that turns), in log; calibrated to cover 80 % on
@@ -93,6 +101,7 @@ class CameraEstimate:
     fall_frames: int  # frames of free fall fitted
     residual_px: float  # RMS of the fall's centroid fit, pixels
     contact_s: float | None = None  # first touch of the ground (None: ground from the rest)
+    touch: str = "soft"  # how the touch was modelled (TOUCHES)
     scale_spread: float = 0.0  # the size's (and distance's) error, log, one standard deviation
 
     @property
@@ -116,8 +125,9 @@ class CameraEstimate:
             "size_factor_10_90": [round(x, 3) for x in self.size_factor_10_90],
             "ground_from": "where the object rests"
             if self.contact_s is None
-            else f"the first touch of the ground, {self.contact_s:.3f} s",
+            else f"the first touch of the ground ({self.touch}), {self.contact_s:.3f} s",
             "contact_s": None if self.contact_s is None else round(self.contact_s, 4),
+            "touch": self.touch,
         }
 
 
@@ -172,15 +182,20 @@ def contact_time(
     frame_dt: float,
     falling: np.ndarray,  # [T] px: the fall's model of the centroid's image height, every frame
     metres_per_px: float,  # at the object's depth (its distance / the focal length in pixels)
+    touch: str = "soft",  # TOUCHES: how the ground's push starts
 ) -> float | None:
     """Seconds from frame 0 to the object's first touch of the ground, between frames: the
     centroid's image height minus the free fall's (``falling``, the fall's fit carried on) is
-    modelled as ``−c·max(t − t_c, 0)²`` (a push that builds as the object squashes) over the
-    fall's last 3 frames and :data:`CONTACT_FRAMES_AFTER` after it; least squares, c ≥ 0 in
-    closed form, t_c on a grid from 3 frames before the fall's end to 1 after it. None when the
-    clip ends before it shows the touch, or when the fitted push moves the centroid less than
-    :data:`CONTACT_MIN_PX` by the window's last frame or brakes it by less than
-    :data:`CONTACT_MIN_G`·g (2c px/s² × ``metres_per_px``): a drift of a badly read fall."""
+    modelled as ``−c·max(t − t_c, 0)²`` (``touch="soft"``: a push that builds as the object
+    squashes) or ``−a·max(t − t_c, 0) − c·max(t − t_c, 0)²`` (``"rigid"``: the fall's speed can
+    also be lost at once) over the fall's last 3 frames and :data:`CONTACT_FRAMES_AFTER` after
+    it; least squares with a, c ≥ 0, t_c on a grid from 3 frames before the fall's end to 1
+    after it. None when the clip ends before it shows the touch, or when the fitted push moves
+    the centroid less than :data:`CONTACT_MIN_PX` by the window's last frame or less than a
+    brake of :data:`CONTACT_MIN_G`·g would over the same time (for the soft push: 2c px/s² ×
+    ``metres_per_px`` ≥ CONTACT_MIN_G·g): a drift of a badly read fall."""
+    if touch not in TOUCHES:
+        raise InputError(f"expected one of {', '.join(TOUCHES)}, got {touch!r}", field="--touch")
     frames = len(track.area)
     if frames < count + CONTACT_FRAMES_AFTER:
         return None
@@ -188,14 +203,37 @@ def contact_time(
     times = used * frame_dt
     residual = track.centroid[used, 1] - falling[used]  # [F] px, ≤ 0 once the ground pushes
     candidates = np.linspace((count - 3) * frame_dt, (count + 1) * frame_dt, 161)
-    after = np.clip(times[None, :] - candidates[:, None], 0.0, None) ** 2  # [C, F]
-    c = np.clip(-(after @ residual) / np.maximum((after**2).sum(1), 1e-12), 0.0, None)
-    errors = ((residual[None, :] + c[:, None] * after) ** 2).sum(1)
-    best = int(np.argmin(errors))
-    braking = 2.0 * c[best] * metres_per_px  # m/s²
-    if c[best] * after[best, -1] < CONTACT_MIN_PX or braking < CONTACT_MIN_G * GRAVITY_MAGNITUDE:
+    linear = np.clip(times[None, :] - candidates[:, None], 0.0, None)  # [C, F] seconds after
+    terms = [linear**2] if touch == "soft" else [linear, linear**2]
+    best = (math.inf, 0, np.zeros(2))
+    for index in range(len(candidates)):
+        for coefficients in _non_negative_fits([t[index] for t in terms], -residual):
+            pushed = sum(k * t[index] for k, t in zip(coefficients, terms, strict=True))
+            error = float(((residual + pushed) ** 2).sum())
+            if error < best[0]:
+                best = (error, index, coefficients)
+    _, index, coefficients = best
+    after = linear[index, -1]  # seconds from the touch to the window's last frame
+    push = sum(k * t[index, -1] for k, t in zip(coefficients, terms, strict=True))  # px by then
+    brake = 0.5 * CONTACT_MIN_G * GRAVITY_MAGNITUDE * after**2  # metres a 1-g brake takes
+    if push < CONTACT_MIN_PX or push * metres_per_px < brake:
         return None
-    return float(candidates[best])
+    return float(candidates[index])
+
+
+def _non_negative_fits(columns: list[np.ndarray], target: np.ndarray) -> list[list[float]]:
+    """Candidate least-squares fits of ``target`` by non-negative multiples of ``columns`` (1 or
+    2 of them): each column alone (clipped at 0) and, where both come out ≥ 0, both together —
+    the non-negative optimum is among them."""
+    fits = []
+    for k, column in enumerate(columns):
+        weight = max(float(column @ target) / max(float(column @ column), 1e-12), 0.0)
+        fits.append([weight if j == k else 0.0 for j in range(len(columns))])
+    if len(columns) == 2 and int((columns[0] > 0).sum()) >= 2:
+        both = np.linalg.lstsq(np.stack(columns, 1), target, rcond=None)[0]
+        if (both >= 0).all():
+            fits.append([float(x) for x in both])
+    return fits
 
 
 def _world_to_cam(pitch: float, height: float) -> Tensor:
@@ -411,6 +449,7 @@ def estimate_camera(
     fov_deg: float | None = None,  # vertical; None: DEFAULT_FOV_DEG
     fit_px: float = FALL_FIT_PX,  # the masks' pixel error: FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
     ground_from_touch: bool = True,  # False: from the rest only (the rule before the touch)
+    touch: str = "soft",  # TOUCHES: how the object meets the ground (contact_time)
 ) -> CameraEstimate:
     """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
     fov = DEFAULT_FOV_DEG if fov_deg is None else float(fov_deg)
@@ -436,7 +475,7 @@ def estimate_camera(
     if ground_from_touch:
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
         falling = f * path[:, 1] / path[:, 2] + cy
-        contact = contact_time(track, count, frame_dt, falling, metres_per_px)
+        contact = contact_time(track, count, frame_dt, falling, metres_per_px, touch)
     if contact is not None:
         # the ground (module doc, 2): the centre at the touch plus the object's extent below
         # its centre (frame 0's silhouette at frame 0's depth)
@@ -476,6 +515,7 @@ def estimate_camera(
         fall_frames=count,
         residual_px=rms,
         contact_s=contact,
+        touch=touch,
         scale_spread=math.hypot(SCALE_ERROR_FACTOR * depth_error, SCALE_ERROR_FLOOR),
     )
     low, high = estimate.size_factor_10_90

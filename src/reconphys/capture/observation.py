@@ -154,6 +154,7 @@ def load_observation(
     background: str | os.PathLike | None = None,  # clean plate image
     camera: str | os.PathLike | None = None,  # camera JSON (.camera), "dataset", None: estimate
     fov_deg: float | None = None,  # vertical field of view for the estimate (None: default)
+    touch: str = "soft",  # how the object meets the ground, for the estimate (calibrate.TOUCHES)
     fps: float | None = None,  # frame rate of a frame folder / override of the file's
     frame_dt: float = 0.03,
     start: float | str = 0.0,  # seconds into the recording: the release (frame 0); before it
@@ -246,12 +247,13 @@ def load_observation(
         release = release_time(chosen, frame_dt)
         return load_observation(
             path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
-            fps=fps, frame_dt=frame_dt, start=release or 0.0, end=end, segment=segment,
+            touch=touch, fps=fps, frame_dt=frame_dt, start=release or 0.0, end=end,
+            segment=segment,
         )  # fmt: skip
     check_release(chosen, str(path), start, frame_dt)
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where it touches or rests
-        found = estimate_camera(chosen, frame_dt, fov_deg, fit_px)
+        found = estimate_camera(chosen, frame_dt, fov_deg, fit_px, touch=touch)
         spec, estimate = found.camera, found.to_json()
     elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
         spec = default_camera(width, height)

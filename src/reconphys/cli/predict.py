@@ -48,11 +48,17 @@ def predict_command(
     camera: Path = typer.Option(
         None,
         help="Camera JSON (K, world_to_cam, ground_height), or 'dataset' (the dataset's view 0); "
-        "default: estimated from the video (scale from the free fall, ground where the object "
-        "rests; needs ≥ 4 frames of fall).",
+        "default: estimated from the video (scale from the free fall, ground where it first "
+        "touches, or else where it rests; needs ≥ 4 frames of fall).",
     ),
     fov: float = typer.Option(
         None, help="Vertical field of view, degrees, for the estimated camera (default 45)."
+    ),
+    touch: str = typer.Option(
+        "soft",
+        help="How the object meets the ground, for the camera read from the video: 'soft' (it "
+        "squashes as it lands) or 'rigid' (it stops or bounces at once: a hard toy, a block). "
+        "'soft' reads a rigid object's ground ~7 cm high.",
     ),
     fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
     start: str = typer.Option(
@@ -137,6 +143,7 @@ def predict_command(
         background=background,
         camera=camera,
         fov=fov,
+        touch=touch,
         fps=fps,
         start=start,
         end=end,

@@ -31,6 +31,7 @@ import torch
 from ..assets.asset import Asset
 from ..assets.build import lifted_above
 from ..capture import Observation
+from ..capture.calibrate import TOUCHES
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
 from ..models.gaussian_shipped import (
@@ -182,6 +183,7 @@ def predict(
     background: str | os.PathLike | None = None,
     camera: str | os.PathLike | None = None,
     fov: float | None = None,
+    touch: str = "soft",  # how the object meets the ground, for the camera read from the video
     fps: float | None = None,
     start: float | str = 0.0,  # seconds into a recording, or "auto" (read from the masks)
     end: float | None = None,
@@ -213,6 +215,8 @@ def predict(
         raise InputError(
             f"expected one of {', '.join(PLACEMENTS)}, got {placement!r}", field="--placement"
         )
+    if touch not in TOUCHES:
+        raise InputError(f"expected one of {', '.join(TOUCHES)}, got {touch!r}", field="--touch")
     if ground not in GROUNDS:
         raise InputError(f"expected camera or landed, got {ground!r}", field="--ground")
     if refine_steps < 0:
@@ -234,6 +238,7 @@ def predict(
         camera=camera,
         fps=fps,
         fov_deg=fov,
+        touch=touch,
         frame_dt=float(predictor.metadata["input"].get("frame_dt", 0.03)),
         sample=sample,
         view=predictor.view if view is None else view,

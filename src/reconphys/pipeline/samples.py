@@ -88,6 +88,7 @@ def load_input(
     fps: float | None = None,
     frame_dt: float = 0.03,
     fov_deg: float | None = None,  # vertical field of view when the camera is estimated
+    touch: str = "soft",  # how the object meets the ground, when the camera is estimated
     sample: str | None = None,  # dataset input: the sample id
     view: int = 0,  # dataset input: the view
     start: float | str = 0.0,  # seconds into a recording: its release (frame 0), or "auto"
@@ -114,6 +115,7 @@ def load_input(
         fps=fps,
         frame_dt=frame_dt,
         fov_deg=fov_deg,
+        touch=touch,
         start=start,
         end=end,
         segment=segment_frames,
