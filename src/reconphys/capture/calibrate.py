@@ -176,6 +176,12 @@ def fall_frames(track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX) -> 
     return count
 
 
+def check_touch(touch: str) -> None:
+    """InputError (``--touch``) unless ``touch`` is one of :data:`TOUCHES`."""
+    if touch not in TOUCHES:
+        raise InputError(f"expected one of {', '.join(TOUCHES)}, got {touch!r}", field="--touch")
+
+
 def contact_time(
     track: _Track,
     count: int,  # frames of free fall
@@ -194,8 +200,7 @@ def contact_time(
     the centroid less than :data:`CONTACT_MIN_PX` by the window's last frame or less than a
     brake of :data:`CONTACT_MIN_G`·g would over the same time (for the soft push: 2c px/s² ×
     ``metres_per_px`` ≥ CONTACT_MIN_G·g): a drift of a badly read fall."""
-    if touch not in TOUCHES:
-        raise InputError(f"expected one of {', '.join(TOUCHES)}, got {touch!r}", field="--touch")
+    check_touch(touch)
     frames = len(track.area)
     if frames < count + CONTACT_FRAMES_AFTER:
         return None
@@ -205,7 +210,7 @@ def contact_time(
     candidates = np.linspace((count - 3) * frame_dt, (count + 1) * frame_dt, 161)
     linear = np.clip(times[None, :] - candidates[:, None], 0.0, None)  # [C, F] seconds after
     terms = [linear**2] if touch == "soft" else [linear, linear**2]
-    best = (math.inf, 0, np.zeros(2))
+    best = (math.inf, 0, [0.0] * len(terms))
     for index in range(len(candidates)):
         for coefficients in _non_negative_fits([t[index] for t in terms], -residual):
             pushed = sum(k * t[index] for k, t in zip(coefficients, terms, strict=True))

@@ -31,7 +31,7 @@ import torch
 from ..assets.asset import Asset
 from ..assets.build import lifted_above
 from ..capture import Observation
-from ..capture.calibrate import TOUCHES
+from ..capture.calibrate import check_touch
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
 from ..models.gaussian_shipped import (
@@ -215,8 +215,7 @@ def predict(
         raise InputError(
             f"expected one of {', '.join(PLACEMENTS)}, got {placement!r}", field="--placement"
         )
-    if touch not in TOUCHES:
-        raise InputError(f"expected one of {', '.join(TOUCHES)}, got {touch!r}", field="--touch")
+    check_touch(touch)
     if ground not in GROUNDS:
         raise InputError(f"expected camera or landed, got {ground!r}", field="--ground")
     if refine_steps < 0:
