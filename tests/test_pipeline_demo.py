@@ -95,6 +95,29 @@ def test_summary_numbers_are_what_predict_computed(demo_out):
     assert f"decode {timings['decode']:.2f}" in summary
 
 
+def test_summary_gives_the_spin_read_beside_the_true_one(demo_out):
+    """With the search (the default) predict reads the spin about the view: the summary puts
+    it beside the truth's, the true spin projected on the camera file's viewing axis."""
+    from reconphys.pipeline.demo import summary_markdown
+
+    out, _ = demo_out
+    prediction = json.loads((out / "prediction.json").read_text())
+    example = load_example(DEFAULT_EXAMPLE)
+    assert "angular" not in prediction["initial_velocity"]  # --no-refine: not read
+    prediction["initial_velocity"]["angular"] = {
+        "about_view_rad_s": 0.5, "about_view_sd_rad_s": 0.25, "shown": True
+    }  # fmt: skip
+    line = next(
+        x
+        for x in summary_markdown(example, prediction, 1.0, out).splitlines()
+        if x.startswith("Spin about the viewing axis")
+    )
+    view_axis = json.loads(example.camera.read_text())["world_to_cam"][2][:3]
+    spin = example.truth["initial_angular_velocity_rad_s"]
+    true_roll = sum(a * w for a, w in zip(view_axis, spin, strict=True))
+    assert "estimated +0.50 (± 0.25; kept)" in line and f"true {true_roll:+.2f}" in line
+
+
 def test_demo_refuses_a_folder_it_did_not_write(tmp_path):
     out = tmp_path / "mine"
     out.mkdir()

@@ -17,11 +17,13 @@ import torch
 from helpers import make_tiny_dataset, rim_noise, train_tiny_gaussian_predictor
 from typer.testing import CliRunner
 
+from reconphys.assets.asset import read_asset
 from reconphys.capture import default_camera, load_observation
 from reconphys.capture.placement import fit_to_mask, linear_velocity_fit
 from reconphys.capture.video import resample_indices, resample_times
 from reconphys.cli import app
 from reconphys.errors import InputError
+from reconphys.geometry import rigid_velocity
 from reconphys.models.model_input import predictor_frames
 from reconphys.models.physics_predictor import resize_frames
 from reconphys.pipeline.search import GIVEN_GEOMETRY_TEMPERATURE, network_intervals, temperature_for
@@ -89,6 +91,21 @@ def test_mp4_path_gives_the_stored_frames_prediction_and_a_full_asset(
     assert "physics network: " in result.output and "(the plain look" in result.output
     motion = summary["initial_velocity"]
     assert motion["released_from_rest"] == (not any(motion["linear_m_s"]))
+    # the spin about the view is read where the clip moves (pipeline/spin.py), and the asset
+    # starts with it: kept, or zero where the frames do not show it
+    if not motion["released_from_rest"]:
+        spin = motion["angular"]
+        assert spin["frames_compared"] >= 0 and "about the viewing axis" in spin["how"]
+        assert any(motion["angular_rad_s"]) == spin["shown"]
+        asset = read_asset(out)
+        centre = asset.gaussians.means.mean(0)
+        expected = rigid_velocity(
+            asset.x0,
+            torch.tensor(motion["linear_m_s"]),
+            torch.tensor(motion["angular_rad_s"]),
+            centre,
+        )
+        assert torch.allclose(asset.v0, expected, atol=1e-3)
     steps = ("decode", "gaussians", "physics_network", "asset_build", "search", "write", "preview")
     for step in steps:
         assert summary["timings_s"][step] >= 0

@@ -9,6 +9,7 @@ path (:mod:`reconphys.pipeline.predict`), so that neither imports the other.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -28,6 +29,7 @@ from ..capture.calibrate import (
 )
 from ..capture.placement import linear_velocity_fit
 from ..errors import InputError
+from ..geometry import rigid_velocity
 from .model_input import frame_crop, predictor_frames, virtual_intrinsics
 
 
@@ -69,14 +71,15 @@ def observed_asset(
     ground_height: float,  # metres
     num_anchors: int | None = None,  # None: the data's
     velocity: Tensor | None = None,  # [3] m/s; None: initial_velocity(placed, observation)
+    angular: Tensor | None = None,  # [3] rad/s about the Gaussians' centre; None: no spin
 ) -> Asset:
-    """New Gaussians of a recording → asset: the initial linear velocity, the settings of the
-    data the physics network was trained on (see
-    :meth:`~reconphys.assets.asset.PhysicsSettings.from_data_settings`), lifted above the ground,
-    anchors/springs/binding built."""
+    """New Gaussians of a recording → asset: the initial linear velocity (of the Gaussians'
+    centre, with ``angular`` about it), the settings of the data the physics network was trained
+    on (see :meth:`~reconphys.assets.asset.PhysicsSettings.from_data_settings`), lifted above the
+    ground, anchors/springs/binding built."""
     if velocity is None:
         velocity = initial_velocity(placed, observation)
-    return build_from_gaussians(
+    asset = build_from_gaussians(
         placed,
         attributes,
         data,
@@ -87,6 +90,11 @@ def observed_asset(
         ground_height=ground_height,
         num_anchors=num_anchors or None,
     )
+    if angular is None or not bool(angular.any()):
+        return asset
+    centre = asset.gaussians.means.mean(0)  # what the spin was read about (pipeline/spin.py)
+    v0 = rigid_velocity(asset.x0, velocity.to(asset.x0), angular.to(asset.x0), centre)
+    return replace(asset, v0=v0)
 
 
 def feed_forward_asset(

@@ -170,7 +170,20 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
             "",
             f"Initial velocity (m/s): estimated {_vector(velocity)}, true "
             f"{_vector(true_velocity)} (from the masks' free fall and growth: frames 0–3 "
-            "decide a release from rest, the whole fall reads a motion; spin is not estimated).",
+            "decide a release from rest, the whole fall reads a motion).",
+        ]
+    spin = prediction.get("initial_velocity", {}).get("angular")
+    true_spin = example.truth.get("initial_angular_velocity_rad_s")
+    if spin is not None and true_spin is not None:
+        view_axis = read_json(example.camera)["world_to_cam"][2][:3]  # camera z in the world
+        true_roll = sum(a * w for a, w in zip(view_axis, true_spin, strict=True))
+        lines += [
+            "",
+            f"Spin about the viewing axis (rad/s): estimated {spin['about_view_rad_s']:+.2f} "
+            + (f"(± {sd:.2f}; " if (sd := spin.get("about_view_sd_rad_s")) is not None else "(")
+            + ("kept" if spin["shown"] else "not shown by the free fall: 0 kept")
+            + f"), true {true_roll:+.2f}, from the free-fall frames rendered and compared; the "
+            f"turns about the image's axes are not read (true spin {_vector(true_spin)}).",
         ]
     lines += [
         "",

@@ -8,6 +8,8 @@ Steps, each timed (``PredictResult.timings``, seconds):
   where it is when it already projects onto it), the 3DGS predictor's from frame 0 (no PLY), or
   a dataset sample's own (ground truth, an upper bound); the initial linear velocity from the
   masks' free fall;
+- ``spin`` (with the search, where the clip is not read as at rest): the spin about the viewing
+  axis from the free-fall frames, rendered and compared (:mod:`.spin`); the asset starts with it;
 - ``physics_network``: the physics predictor on frames 0..T−1 → (m, k, d, f);
 - ``asset_build``: anchors (seeded by the object id), kNN springs, binding;
 - ``search`` (the default; ``refine=False`` skips it): log k/m, log d/m and the friction fitted to
@@ -27,9 +29,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import torch
+from torch import Tensor
 
 from ..assets.asset import Asset
 from ..assets.build import lifted_above
+from ..assets.gaussians import Gaussians
 from ..capture import Observation
 from ..capture.calibrate import check_touch
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
@@ -45,6 +49,7 @@ from ..models.reconstruct import (
     initial_velocity_fit,
     object_distance,
     observed_asset,
+    observed_fall_frames,
     predicted_gaussians,
 )
 from ..physics import ATTRIBUTES
@@ -307,6 +312,43 @@ def _start_how(start: float | str, found: float) -> str:
     return "given (--start)" if start else "frame 0 of the recording"
 
 
+def spin_estimate(
+    placed: Gaussians, observation: Observation, velocity: Tensor
+) -> tuple[Tensor, dict]:
+    """The spin about the viewing axis read from the free fall (:mod:`.spin`) → (angular
+    velocity [3] rad/s world frame, zero where not shown; what prediction.json says of it)."""
+    from .spin import MIN_GAIN, ROLL_AXES, spin_fit
+
+    fall = observed_fall_frames(observation)
+    fit = spin_fit(
+        placed,
+        observation.frames,
+        observation.masks,
+        observation.camera,
+        observation.frame_dt,
+        velocity,
+        fall,
+        axes=ROLL_AXES,
+    )
+    sd = float("inf") if fit.sd_camera_axes is None else float(fit.sd_camera_axes[2])
+    report = {
+        "shown": fit.shown,
+        "frames_compared": fit.frames,
+        "error_explained": round(fit.gain, 4),
+        "about_view_rad_s": round(
+            float(observation.camera.world_to_cam[2, :3].double() @ fit.fitted), 4
+        ),
+        # None where not read or the error has no minimum along the axis (a flat profile)
+        "about_view_sd_rad_s": round(sd, 4) if math.isfinite(sd) else None,
+        "how": "the frame-0 Gaussians turned about the viewing axis and carried in free fall, "
+        f"rendered and compared with the free-fall frames (pipeline/spin.py); kept where it "
+        f"explains ≥ {MIN_GAIN:.0%} more of them than no spin; the turns about the image's axes "
+        "are not read",
+        "seconds": fit.seconds,
+    }
+    return fit.angular.float(), report
+
+
 def check_initial_speed(velocity: torch.Tensor, source: str) -> None:  # velocity [3] m/s
     """InputError (naming the recording) when the initial velocity read is faster than
     :data:`MAX_INITIAL_SPEED_M_S`: a confident wrong launch is worse than a refusal."""
@@ -400,8 +442,19 @@ def predict_observation(
                 if at_rest
                 else ", then again over the whole free fall where it shows more frames"
             )
-            + " (angular velocity not estimated)",
+            + (
+                " (angular velocity: not estimated at rest nor without the search)"
+                if at_rest or not refine
+                else ""
+            ),
         }
+    angular = None
+    if build_new and refine and not at_rest:  # the spin about the view, from the free fall
+        angular, details["initial_velocity"]["angular"] = spin_estimate(
+            placed, observation, velocity
+        )
+        details["initial_velocity"]["angular_rad_s"] = [round(float(x), 4) for x in angular]
+        timings["spin"] = details["initial_velocity"]["angular"].pop("seconds")
     means = placed.means if build_new else dataset_asset.gaussians.means
     landed = estimate_ground_height(means, observation.masks[-1], observation.camera)
     details["ground_check_m"] = None if landed is None else round(landed, 4)
@@ -417,7 +470,7 @@ def predict_observation(
             raise InputError("a dataset sample's ground is known (z = 0)", field="--ground")
         ground_height = landed
     details["ground_height_m"] = round(ground_height, 4)
-    timings["gaussians"] = time.perf_counter() - started
+    timings["gaussians"] = time.perf_counter() - started - timings.get("spin", 0.0)
 
     started = time.perf_counter()
     with torch.no_grad():
@@ -449,6 +502,7 @@ def predict_observation(
             ground_height,
             num_anchors,
             velocity,
+            angular,
         )
     else:
         asset = replace(dataset_asset, physics=replace(dataset_asset.physics, **attributes))
