@@ -30,9 +30,10 @@ import torch
 from torch import Tensor
 
 from ..assets.gaussians import Gaussians
+from ..assets.normalize import rotate_gaussians
 from ..capture import CameraSpec
 from ..capture.window import comparison_view, object_window
-from ..geometry import axis_angle_to_matrix, matrix_to_quaternion, quaternion_multiply
+from ..geometry import axis_angle_to_matrix
 from ..physics.model import GRAVITY
 from .search import lighting_gain, render_compared, scaled_colours, supersampling
 
@@ -62,7 +63,6 @@ SD_FACTOR = 0.15
 class SpinFit:
     angular: Tensor  # [3] rad/s, world frame (zero where not shown)
     fitted: Tensor  # [3] rad/s, world frame: the best fit, kept or not
-    linear: Tensor  # [3] m/s, world frame: the linear velocity of the best fit
     error: float  # mean squared error of the best fit (colours + silhouettes)
     error_at_rest: float  # without spin (at the start's velocity or the best fit's, the lower)
     frames: int  # free-fall frames compared after frame 0
@@ -78,24 +78,23 @@ class SpinFit:
 def turned(
     gaussians: Gaussians,  # [N] frame 0, world frame
     angular: Tensor,  # [B, 3] rad/s, world frame
-    linear: Tensor,  # [3] m/s, world frame, of the Gaussians' centre
+    linear: Tensor,  # [3] or [B, 3] m/s, world frame, of the Gaussians' centre
     times: Tensor,  # [F] seconds after frame 0
 ) -> Gaussians:  # [B·F, N]: candidate b at time f is row b·F + f
     """Frame 0's Gaussians in rigid free fall: turned by ω·t about their centre, carried by
     v·t + ½·g·t² (their rotations turned with them)."""
-    means = gaussians.means.double()
-    centre = means.mean(0)
+    dtype = gaussians.means.dtype
+    centred = gaussians.map(lambda x: x.double())
+    centre = centred.means.mean(0)
+    centred = centred.with_means(centred.means - centre)
     rotation = axis_angle_to_matrix(angular.double()[:, None] * times.double()[None, :, None])
     rotation = rotation.reshape(-1, 3, 3)  # [B·F, 3, 3]
     t = times.double().repeat(len(angular))[:, None]  # [B·F, 1]
     gravity = torch.as_tensor(GRAVITY, dtype=torch.float64)
     linear = linear.double().expand(len(angular), 3).repeat_interleave(len(times), 0)
     shift = centre + linear * t + 0.5 * gravity * t**2  # [B·F, 3]
-    moved = (means - centre) @ rotation.transpose(1, 2) + shift[:, None]
-    quats = quaternion_multiply(matrix_to_quaternion(rotation)[:, None], gaussians.quats.double())
-    batch = gaussians.map(lambda x: x.expand(len(rotation), *x.shape))
-    dtype = gaussians.means.dtype
-    return replace(batch, means=moved.to(dtype), quats=quats.to(dtype))
+    batch = rotate_gaussians(centred.map(lambda x: x.expand(len(rotation), *x.shape)), rotation)
+    return batch.with_means(batch.means + shift[:, None]).map(lambda x: x.to(dtype))
 
 
 @torch.no_grad()
@@ -116,7 +115,7 @@ def spin_fit(
     zero = torch.zeros(3, dtype=torch.float64)
     if count < MIN_FRAMES:
         seconds = time.perf_counter() - started
-        return SpinFit(zero, zero, linear.double(), 0.0, 0.0, max(count, 0), False, seconds)
+        return SpinFit(zero, zero, 0.0, 0.0, max(count, 0), False, seconds)
     frames, masks = frames[: count + 1], masks[: count + 1].to(frames)
     window = object_window(masks)
     both = torch.cat([frames * masks[..., None], masks[..., None]], -1)
@@ -166,12 +165,11 @@ def spin_fit(
     still = current.clone()
     still[3:] = 0.0  # without spin: at the start or at the best velocity, whichever fits better
     at_rest = min(at_rest, float(errors(still[None])[0]))
-    fitted_linear = current[:3] @ to_cam
     fitted = current[3:] @ to_cam  # camera axes → world
     sd = SD_FACTOR * (best / curvature.clamp_min(1e-12)).sqrt()
     sd = torch.where(curvature > 0, sd, torch.full_like(sd, float("inf")))
     sd = torch.where(curvature.isnan(), curvature, sd)
-    fit = SpinFit(zero, fitted, fitted_linear, best, at_rest, count, False, 0.0, sd)
+    fit = SpinFit(zero, fitted, best, at_rest, count, False, 0.0, sd)
     shown = fit.gain >= MIN_GAIN
     return replace(
         fit,
