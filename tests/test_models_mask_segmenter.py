@@ -18,14 +18,17 @@ from reconphys.cli import app
 from reconphys.data import DropDataset, GeneratedDropDataset, make_dataset, make_settings
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import (
+    SHIPPED_MASKS_PATHS,
     MaskSegmenter,
     SegmenterConfig,
+    SegmenterEnsemble,
     clip_logits,
     clip_references,
     frame_inputs,
     keep_main_blob,
     load_mask_segmenter,
     segment_clip,
+    shipped_fingerprint,
 )
 from reconphys.pipeline.samples import segment_frames
 from reconphys.render.video import write_mp4
@@ -151,9 +154,30 @@ def test_a_recording_without_masks_or_plate_goes_through_the_segmenter(realistic
     assert plain.mask_source == "background subtraction (border colour)"
 
 
+def test_the_shipped_segmenter_averages_its_members_logits(realistic_views):
+    """The default is the ensemble of the shipped members: its logits are their mean, it differs
+    from each, and its fingerprint (what stored segmenter masks are checked against) covers all."""
+    ensemble = load_mask_segmenter()
+    assert isinstance(ensemble, SegmenterEnsemble) and len(ensemble.members) == 2
+    members = [load_mask_segmenter(path) for path in SHIPPED_MASKS_PATHS]
+    frames = realistic_views[0][0]
+    each = torch.stack([clip_logits(member, frames) for member in members])
+    mean = clip_logits(ensemble, frames)
+    assert torch.allclose(mean, each.mean(0), atol=1e-5)
+    assert (each[0] - each[1]).abs().max() > 0.5  # two networks, not one twice
+    as_list = load_mask_segmenter(list(SHIPPED_MASKS_PATHS))
+    assert torch.allclose(clip_logits(as_list, frames), mean, atol=1e-6)
+    fingerprints = {shipped_fingerprint(), *(shipped_fingerprint(p) for p in SHIPPED_MASKS_PATHS)}
+    assert len(fingerprints) == 3
+    with pytest.raises(ValueError, match="at least one member"):
+        SegmenterEnsemble([])
+
+
 def test_missing_or_corrupt_weights_are_one_line_errors(tmp_path):
     with pytest.raises(InputError, match="mask segmenter not found"):
         load_mask_segmenter(tmp_path / "none.safetensors")
+    with pytest.raises(InputError, match="mask segmenter not found"):  # one member of a list
+        load_mask_segmenter([SHIPPED_MASKS_PATHS[0], tmp_path / "none.safetensors"])
     bad = tmp_path / "bad.safetensors"
     bad.write_bytes(b"not a safetensors file")
     meta = {"format": "reconphys.mask_segmenter", "version": 1, "segmenter": {}, "training": {}}

@@ -9,8 +9,10 @@ frames). A pixel's own history is ambiguous — a step from one colour to anothe
 arriving (``A`` is background) or leaving (``Z`` is) — so the network also sees the image around
 it (the object falls downwards in the image) and the clip time ``t``. Inputs per frame, 16
 channels: ``F_t, F_t − A, F_t − Z, F_t − M, A − Z, t/(T−1)``; output: the object's logit per pixel.
-Trained on the realistic look's stored masks (``reconphys train-masks``, train/masks.py); the
-shipped weights are ``reconphys/weights/mask_segmenter.safetensors`` + ``.json``.
+Trained on the realistic look's stored masks (``reconphys train-masks``, train/masks.py). The
+shipped segmenter is an ensemble of two such networks, trained on different looks
+(``reconphys/weights/mask_segmenter.safetensors`` and ``mask_segmenter_2.safetensors``, each with
+its ``.json``): their logits are averaged (``SegmenterEnsemble``).
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ from ..io import atomic_file, read_json
 FORMAT = "reconphys.mask_segmenter"
 VERSION = 1
 INPUT_CHANNELS = 16
-SHIPPED_MASKS_PATH = (
-    Path(__file__).resolve().parent.parent / "weights" / "mask_segmenter.safetensors"
+_WEIGHTS = Path(__file__).resolve().parent.parent / "weights"
+SHIPPED_MASKS_PATHS = (  # the shipped ensemble's members (docs/usage.md#two-networks-averaged)
+    _WEIGHTS / "mask_segmenter.safetensors",
+    _WEIGHTS / "mask_segmenter_2.safetensors",
 )
 FRAMES_PER_CALL = 8  # bounds memory at large resolutions
 MAX_SIDE = 128  # px: a larger clip is segmented area-averaged down to this, the logits upsampled
@@ -92,6 +96,22 @@ class MaskSegmenter(nn.Module):
         return self.head(x)[:, 0, :height, :width]
 
 
+class SegmenterEnsemble(nn.Module):
+    """Networks read as one: the mean of the members' logits [B, H, W] for [B, 16, H, W]."""
+
+    def __init__(self, members: list[MaskSegmenter]):
+        super().__init__()
+        if not members:
+            raise ValueError("an ensemble needs at least one member")
+        self.members = nn.ModuleList(members)
+
+    def forward(self, x: Tensor) -> Tensor:
+        return torch.stack([member(x) for member in self.members]).mean(0)
+
+
+Segmenter = MaskSegmenter | SegmenterEnsemble
+
+
 def clip_references(frames: Tensor) -> Tensor:  # [T, H, W, 3] in [0, 1] → [3, 3, H, W]
     """``A`` (mean of frames 0–1), ``Z`` (median of the last three), ``M`` (median of all),
     channels first."""
@@ -113,7 +133,7 @@ def frame_inputs(
 
 
 @torch.no_grad()
-def clip_logits(model: MaskSegmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
+def clip_logits(model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
     """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera).
 
     The network saw 96-px clips: its receptive field spans an object there, not in a phone's
@@ -139,7 +159,7 @@ def clip_logits(model: MaskSegmenter, frames: Tensor, max_side: int = MAX_SIDE) 
     return torch.cat(logits)
 
 
-def segment_clip(model: MaskSegmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
+def segment_clip(model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
     """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera): logits
     above 0 (of the clip at most ``max_side`` px, see clip_logits), the main blob kept."""
     return keep_main_blob(clip_logits(model, frames, max_side) > 0).float()
@@ -162,11 +182,15 @@ def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:
 
 
 def shipped_fingerprint(path: str | os.PathLike | None = None) -> str:
-    """The first 16 hex digits of the SHA-256 of the segmenter's weights (default: shipped)."""
+    """The first 16 hex digits of the SHA-256 of a segmenter's weights (default: the shipped
+    ensemble's members' weights, one after the other)."""
     import hashlib
 
-    path = SHIPPED_MASKS_PATH if path is None else Path(path)
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    paths = SHIPPED_MASKS_PATHS if path is None else (Path(path),)
+    digest = hashlib.sha256()
+    for member in paths:
+        digest.update(member.read_bytes())
+    return digest.hexdigest()[:16]
 
 
 def save_mask_segmenter(model: MaskSegmenter, path: str | os.PathLike, training: dict) -> Path:
@@ -185,13 +209,23 @@ def save_mask_segmenter(model: MaskSegmenter, path: str | os.PathLike, training:
     return path
 
 
-def load_mask_segmenter(path: str | os.PathLike | None = None) -> MaskSegmenter:
-    """The segmenter at ``path`` (a .safetensors file or a ``train-masks`` OUT folder; default:
-    the shipped one), in eval mode; InputError naming the file when missing or corrupt."""
+def load_mask_segmenter(
+    path: str | os.PathLike | list | tuple | None = None,
+) -> Segmenter:
+    """The segmenter at ``path`` (a .safetensors file or a ``train-masks`` OUT folder), the
+    ensemble of several such paths (a list or tuple), or by default the shipped ensemble; in eval
+    mode. InputError naming the file when one is missing or corrupt."""
+    if path is None or isinstance(path, (list, tuple)):
+        members = SHIPPED_MASKS_PATHS if path is None else path
+        return SegmenterEnsemble([_load_one(member) for member in members]).eval()
+    return _load_one(path)
+
+
+def _load_one(path: str | os.PathLike) -> MaskSegmenter:
     from safetensors import SafetensorError
     from safetensors.torch import load_file
 
-    path = SHIPPED_MASKS_PATH if path is None else Path(path)
+    path = Path(path)
     if path.is_dir():
         path = path / "model.safetensors"
     json_path = path.with_suffix(".json")
