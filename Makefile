@@ -108,8 +108,8 @@ gs-model-crop: install
 	cp runs/gs_crop/model.safetensors src/reconphys/weights/gaussian_predictor_crop.safetensors
 	cp runs/gs_crop/model.json src/reconphys/weights/gaussian_predictor_crop.json
 
-# The shipped mask segmenter's recipe (docs/usage.md "Masks without a clean plate"; about 3 h 30 min
-# on 2 CPU cores): realistic-look videos of 60 pybullet meshes (20 more held out) and 80 procedural
+# The shipped mask segmenter's recipe (docs/usage.md "Masks without a clean plate"; two trainings of
+# 8000 steps, the first measured at about 1 h 35 min on 2 CPU cores, plus the data): realistic-look videos of 60 pybullet meshes (20 more held out) and 80 procedural
 # shapes at 96 px, as many again in the vivid look (2026-11-27), every held-out and validation
 # mesh left out (configs/masks_held_out.txt), 8000 steps of train-masks. The shipped segmenter is
 # an ensemble of two such networks (2026-11-28): the first's vivid clips have high-contrast floors
