@@ -12,10 +12,11 @@ taken as a user's recording (frames only):
   the record, from the rest alone:
   scale error = the object's metric size read from the video / the truth − 1 (from the distance
   and the focal length: size = pixels · distance / f), and how often the size's 10–90 % interval
-  (prediction.json's size_factor_10_90) holds the truth; ground error = the drop height read from
-  the video − the true one (the height above the estimated ground of the object's true lowest
-  point in frame 0, at its pixel and the depth the estimate gives the object), metres: what
-  decides when the simulated object lands.
+  (prediction.json's size_factor_10_90) holds the truth, and the drop height's
+  (drop_height_m_10_90: frame 0's lowest point above the ground read); ground error = the drop
+  height read from the video − the true one (the height above the estimated ground of the
+  object's true lowest point in frame 0, at its pixel and the depth the estimate gives the
+  object), metres: what decides when the simulated object lands.
 
     python benchmarks/realistic_input.py data/real_other [--limit 40]
 """
@@ -54,6 +55,9 @@ def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True) ->
         **errors,
         "contact_s": estimate.contact_s,
         "size_factor_10_90": list(estimate.size_factor_10_90),  # true size / read: 10–90 %
+        "drop_height_m": estimate.drop_height,  # frame 0's lowest point above the ground read
+        "drop_height_m_10_90": list(estimate.drop_height_10_90),
+        "drop_height_true_m": float(lowest[2]),
     }
 
 
@@ -145,11 +149,14 @@ def main() -> None:
             for g in good
             for lo, hi in [g["size_factor_10_90"]]
         ]
+        drop = [g["drop_height_m_10_90"] + [g["drop_height_true_m"]] for g in good]
         print(
             f"{name}: |scale error| mean {scale.mean():.3f} median {np.median(scale):.3f} "
             f"≤ 10 %: {(scale <= 0.1).mean():.0%}; |ground error| mean {100 * ground.mean():.1f} "
             f"cm median {100 * np.median(ground):.1f} cm ≤ 2 cm: {(ground <= 0.02).mean():.0%}; "
             f"refused {refused}; the size's 10–90 % interval holds the truth on {np.mean(held):.0%}"
+            f"; the drop height's on {np.mean([lo <= t <= hi for lo, hi, t in drop]):.0%} "
+            f"(mean width {100 * np.mean([hi - lo for lo, hi, _ in drop]):.1f} cm)"
         )
     print(f"(default vertical field of view {DEFAULT_FOV_DEG}°)")
     if args.out:

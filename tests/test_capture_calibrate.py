@@ -11,7 +11,7 @@ import pytest
 import torch
 from helpers import rim_noise
 
-from reconphys.capture.calibrate import estimate_camera
+from reconphys.capture.calibrate import DROP_HEIGHT_ERROR_FLOOR_M, estimate_camera
 from reconphys.capture.masks import release_time
 from reconphys.errors import InputError
 from reconphys.render.cameras import intrinsics_from_fov, look_at
@@ -299,6 +299,35 @@ def test_the_size_interval_holds_the_truth_and_widens_with_a_shorter_fall():
         widths[(15.0, 0.15)],
     )
     assert short_frames < long_frames and short_high > long_high
+
+
+def test_the_drop_height_is_read_with_an_interval_that_holds_it():
+    """prediction.json's ``drop_height_m``: frame 0's lowest silhouette point above the ground
+    read (with a touch, the fall's length until it). The soft ball dropped 0.45 m comes back to
+    2 cm; read from the rest (no touch in the clip), r/2 short, as the rest rule places a ball's
+    ground. Its 10–90 % interval is the size's relative error times the height beside a floor
+    of DROP_HEIGHT_ERROR_FLOOR_M, and holds both; it never goes below the ground."""
+    radius, drop = 0.1, 0.45
+    touched = estimate_camera(ball_masks(15.0, 2.0, drop, radius, braking_g=5.0)[0], 0.03, 45.0)
+    masks = ball_masks(15.0, 2.0, drop, radius)[0]  # stops dead: at rest after the fall
+    count = estimate_camera(masks, 0.03, fov_deg=45.0).fall_frames
+    rested = estimate_camera(masks[: count + 1], 0.03, fov_deg=45.0)
+    assert touched.contact_s is not None and rested.contact_s is None
+    assert touched.drop_height == pytest.approx(drop, abs=0.02)
+    assert rested.drop_height == pytest.approx(drop - 0.5 * radius, abs=0.02)
+    for estimate in (touched, rested):
+        low, high = estimate.drop_height_10_90
+        half = 1.2816 * math.hypot(
+            estimate.drop_height * estimate.scale_spread, DROP_HEIGHT_ERROR_FLOOR_M
+        )
+        assert high - estimate.drop_height == pytest.approx(half, rel=1e-3)
+        assert low == pytest.approx(max(estimate.drop_height - half, 0.0), abs=1e-4)
+        assert low <= drop <= high
+        written = estimate.to_json()
+        assert written["drop_height_m"] == round(estimate.drop_height, 4)
+        assert written["drop_height_m_10_90"] == [round(low, 4), round(high, 4)]
+    low_drop = ball_masks(15.0, 2.0, 0.05, radius, braking_g=5.0)[0]
+    assert estimate_camera(low_drop, 0.03, fov_deg=45.0).drop_height_10_90[0] == 0.0
 
 
 def _held_disc(release: float, held_row: float = 12.0, accel: float = 900.0, count: int = 30):

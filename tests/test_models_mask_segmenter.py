@@ -308,6 +308,9 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
     estimate = read["camera_estimate"]
     assert estimate["fall_frames"] >= 4 and estimate["fov_deg"] == 45.0
     assert "ground_from" in estimate  # the first touch, or where it rests
+    low, high = estimate["drop_height_m_10_90"]  # how well the ground is known, printed too
+    assert 0 <= low < estimate["drop_height_m"] < high
+    assert f"the object starts {estimate['drop_height_m']:.2f} m above it" in result.output
     # not the plain look: the physics network of object crops reads it
     assert summary["model"].endswith("physics_predictor_crop.safetensors")
     assert "object crops" in summary["model_choice"]

@@ -87,6 +87,12 @@ MAX_READ_SIZE_M = 3.0
 # shown is too short or its masks too noisy (a clip that starts just before the landing); the
 # validation drops of this look never went past ×2.6 (docs/usage.md, camera and ground)
 MAX_SIZE_FACTOR = 3.0
+# The drop height's 10–90 % interval: the size's relative error times the height, beside this
+# floor (metres, one standard deviation) for what the scale does not carry: the touch's timing,
+# the rest rule, an object that turns. Chosen on validation drops of both looks as the smallest
+# of 2–8 cm whose intervals held the truth on 80 % (docs/usage.md "How well the drop height is
+# known"); a pixel-based floor held less on another engine's drops at the same width
+DROP_HEIGHT_ERROR_FLOOR_M = 0.06
 
 
 @dataclass
@@ -103,6 +109,19 @@ class CameraEstimate:
     contact_s: float | None = None  # first touch of the ground (None: ground from the rest)
     touch: str = "soft"  # how the touch was modelled (TOUCHES)
     scale_spread: float = 0.0  # the size's (and distance's) error, log, one standard deviation
+    drop_height: float = 0.0  # frame 0's lowest silhouette point above the ground read, metres
+
+    @property
+    def drop_height_spread(self) -> float:
+        """The drop height's error, metres, one standard deviation: the size's share of it (a
+        length read from the fall) beside :data:`DROP_HEIGHT_ERROR_FLOOR_M`."""
+        return math.hypot(self.drop_height * self.scale_spread, DROP_HEIGHT_ERROR_FLOOR_M)
+
+    @property
+    def drop_height_10_90(self) -> tuple[float, float]:
+        """The true drop height, metres: 10–90 % interval (not below the ground)."""
+        half = Z_10_90 * self.drop_height_spread
+        return max(self.drop_height - half, 0.0), self.drop_height + half
 
     @property
     def size_factor_10_90(self) -> tuple[float, float]:
@@ -123,6 +142,8 @@ class CameraEstimate:
             "fall_frames": self.fall_frames,
             "fall_fit_rms_px": round(self.residual_px, 3),
             "size_factor_10_90": [round(x, 3) for x in self.size_factor_10_90],
+            "drop_height_m": round(self.drop_height, 4),
+            "drop_height_m_10_90": [round(x, 4) for x in self.drop_height_10_90],
             "ground_from": "where the object rests"
             if self.contact_s is None
             else f"the first touch of the ground ({self.touch}), {self.contact_s:.3f} s",
@@ -476,6 +497,7 @@ def estimate_camera(
             "with --masks DIR",
             source="camera from the video",
         )
+    below = (track.bottom[0] - track.centroid[0, 1]) * metres_per_px  # frame 0: centre to bottom
     contact = None
     if ground_from_touch:
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
@@ -485,7 +507,6 @@ def estimate_camera(
         # the ground (module doc, 2): the centre at the touch plus the object's extent below
         # its centre (frame 0's silhouette at frame 0's depth)
         at_contact = positions(params, np.array([contact]))[0]
-        below = (track.bottom[0] - track.centroid[0, 1]) * metres_per_px
         camera_height = float(at_contact @ down) + below
     else:
         # the object at rest (last frame) at the depth of its landing point; its lowest
@@ -522,6 +543,7 @@ def estimate_camera(
         contact_s=contact,
         touch=touch,
         scale_spread=math.hypot(SCALE_ERROR_FACTOR * depth_error, SCALE_ERROR_FLOOR),
+        drop_height=float(camera_height - params[:3] @ down - below),
     )
     low, high = estimate.size_factor_10_90
     if not high <= MAX_SIZE_FACTOR:

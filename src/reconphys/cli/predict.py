@@ -180,6 +180,12 @@ def predict_command(
             f"object's size and speeds are known to ×{low:.2f}–×{high:.2f} (10–90 %)"
             + ("; give --camera FILE for more" if high > 1.25 else "")
         )
+        drop_low, drop_high = estimate["drop_height_m_10_90"]
+        typer.echo(
+            f"ground read from {estimate['ground_from']}: the object starts "
+            f"{estimate['drop_height_m']:.2f} m above it ({drop_low:.2f}–{drop_high:.2f} m, "
+            "10–90 %)"
+        )
     if "model_choice" in summary:
         typer.echo(f"physics network: {summary['model']} ({summary['model_choice']})")
     if "gs_model_choice" in summary:
