@@ -42,6 +42,7 @@ from .masks import (
     release_time,
     subtract_background,
 )
+from .stabilize import MAX_SHAKE_SHARE, crop_margin, read_shake, steady
 from .video import (
     VIDEO_SUFFIXES,
     WORK_MAX_SIDE,
@@ -77,6 +78,7 @@ class Observation:
     start_s: float = 0.0  # seconds into the recording of frame 0 (given, or read: --start auto)
     time_resampling: str = "the recorded frames"  # how frames at frame_dt were made (video.py)
     recorded_size: tuple[int, int] | None = None  # (width, height) as filmed (None: = size)
+    camera_shake: dict | None = None  # the camera's shake read and taken out (stabilize.py)
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -215,10 +217,29 @@ def load_observation(
     fit_px = FALL_FIT_PX
     raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3].astype(np.float32) / 255.0)
+    # a hand-held camera: its shake read from the background and taken out (stabilize.py)
+    shake = read_shake(rgb)
+    margin, read_fov = crop_margin(shake), fov_deg
+    if shake.largest_px > MAX_SHAKE_SHARE * min(height, width):
+        raise InputError(
+            f"the camera moves: the background shifts by {shake.largest_px:.0f} px over the "
+            f"clip (more than {MAX_SHAKE_SHARE:.0%} of the frame), which the masks and the "
+            "camera cannot follow; hold the camera still or put it on a stand",
+            source=str(path),
+        )
+    if margin:
+        rgb = steady(rgb, shake)
+        if fov_deg is not None:  # the user's field of view is the whole frame's
+            half = math.tan(math.radians(fov_deg) / 2) * (height - 2 * margin) / height
+            read_fov = math.degrees(2 * math.atan(half))
+        height, width = rgb.shape[1:3]
     if all_masks is not None:
         chosen = all_masks[torch.from_numpy(picks)]
+        if margin:
+            chosen = (steady(chosen[..., None], shake)[..., 0] > 0.5).float()
     elif background is not None:
-        plate = read_background(background, height, width, recorded_size)
+        plate = read_background(background, height + 2 * margin, width + 2 * margin, recorded_size)
+        plate = plate[margin : plate.shape[0] - margin, margin : plate.shape[1] - margin]
         chosen = subtract_background(rgb, plate)
         mask_source = f"background subtraction (clean plate {background})"
     else:
@@ -253,12 +274,14 @@ def load_observation(
     check_release(chosen, str(path), start, frame_dt)
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where it touches or rests
-        found = estimate_camera(chosen, frame_dt, fov_deg, fit_px, touch=touch)
+        found = estimate_camera(chosen, frame_dt, read_fov, fit_px, touch=touch)
         spec, estimate = found.camera, found.to_json()
     elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
-        spec = default_camera(width, height)
+        spec = default_camera(width + 2 * margin, height + 2 * margin)
+        spec = spec.cropped(margin, margin, width, height) if margin else spec
     else:
-        spec = read_camera(camera, *recorded_size).resized(width, height)
+        spec = read_camera(camera, *recorded_size).resized(width + 2 * margin, height + 2 * margin)
+        spec = spec.cropped(margin, margin, width, height) if margin else spec
         check_camera_file(chosen, frame_dt, spec, fit_px)
     return Observation(
         recording=rgb,
@@ -271,6 +294,7 @@ def load_observation(
         recorded_fps=recorded_fps,
         recorded_frames=recorded,
         camera_estimate=estimate,
+        camera_shake=shake.to_json(margin > 0, margin),
         black_backdrop=black,
         fall_fit_px=fit_px,
         start_s=start,

@@ -282,6 +282,8 @@ def predict(
     }
     if observation.camera_estimate is not None:
         details["input"]["camera_estimate"] = observation.camera_estimate
+    if observation.camera_shake is not None:
+        details["input"]["camera_shake"] = observation.camera_shake
 
     return predict_observation(
         observation,
