@@ -35,7 +35,8 @@ from common import camera_read_errors, mean_mask_iou
 
 from reconphys.capture import read_camera
 from reconphys.capture.calibrate import SEGMENTER_FALL_FIT_PX, estimate_camera
-from reconphys.capture.stabilize import STILL_PX, crop_margin, read_shake, steady, warp
+from reconphys.capture.masks import border_is_uniform
+from reconphys.capture.stabilize import STILL_PX, Shake, crop_margin, read_shake, steady, warp
 from reconphys.capture.video import read_video
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
@@ -129,7 +130,9 @@ def main() -> None:
             shaken_masks = (warp(masks[..., None], walk)[..., 0] > 0.5).float()[:, inner, inner]
             still_masks = masks[:, inner, inner]
             tic = time.perf_counter()
-            shake = read_shake(shaken)
+            shake = (
+                Shake(None, 0) if border_is_uniform(shaken) else read_shake(shaken)
+            )  # as predict
             seconds = time.perf_counter() - tic
             margin = crop_margin(shake)
             steadied = steady(shaken, shake)

@@ -42,7 +42,7 @@ from .masks import (
     release_time,
     subtract_background,
 )
-from .stabilize import MAX_SHAKE_SHARE, crop_margin, read_shake, steady
+from .stabilize import MAX_SHAKE_SHARE, Shake, crop_margin, read_shake, steady
 from .video import (
     VIDEO_SUFFIXES,
     WORK_MAX_SIDE,
@@ -217,8 +217,9 @@ def load_observation(
     fit_px = FALL_FIT_PX
     raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3].astype(np.float32) / 255.0)
-    # a hand-held camera: its shake read from the background and taken out (stabilize.py)
-    shake = read_shake(rgb)
+    # a hand-held camera: its shake read from the background and taken out (stabilize.py); a
+    # one-colour border (a plain backdrop) shows no shake, and an object on it is not one
+    shake = Shake(None, 0) if border_is_uniform(rgb) else read_shake(rgb)
     margin, read_fov = crop_margin(shake), fov_deg
     if shake.largest_px > MAX_SHAKE_SHARE * min(height, width):
         raise InputError(

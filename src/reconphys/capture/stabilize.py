@@ -36,7 +36,8 @@ from torch import Tensor
 
 TILE_GRID = 4  # tiles a side
 # Per pixel, the smaller eigenvalue of a tile's (weighted) structure tensor below which it
-# cannot say where it moved; chosen on static and shaken validation clips (docs/usage.md)
+# cannot say where it moved; chosen on still and shaken validation clips: at 5e-5 and below
+# still clips of the muted look were read as moving by pixels (docs/usage.md)
 TEXTURE_MIN = 2e-4
 MIN_TILES = 4  # textured tiles needed to read a frame's shift ...
 # ... spread over at least this many rows and columns of tiles: an object on a plain background
@@ -56,7 +57,7 @@ class Shake:
     """The camera's shake read from a clip."""
 
     shifts: Tensor | None  # [T, 2] px (x right, y down): the background's shift from frame 0
-    tiles_read: int  # tiles textured enough to read (None shifts: fewer than MIN_TILES)
+    tiles_read: int  # tiles textured enough to read (None shifts: too few, or not spread)
 
     @property
     def largest_px(self) -> float:
