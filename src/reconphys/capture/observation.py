@@ -221,6 +221,7 @@ def load_observation(
     # one-colour border (a plain backdrop) shows no shake, and an object on it is not one
     shake = Shake(None, 0) if border_is_uniform(rgb) else read_shake(rgb)
     margin, read_fov = crop_margin(shake), fov_deg
+    filmed_width, filmed_height = width, height  # before the crop (camera files, plates)
     if shake.largest_px > MAX_SHAKE_SHARE * min(height, width):
         raise InputError(
             f"the camera moves: the background shifts by {shake.largest_px:.0f} px over the "
@@ -239,8 +240,8 @@ def load_observation(
         if margin:
             chosen = (steady(chosen[..., None], shake)[..., 0] > 0.5).float()
     elif background is not None:
-        plate = read_background(background, height + 2 * margin, width + 2 * margin, recorded_size)
-        plate = plate[margin : plate.shape[0] - margin, margin : plate.shape[1] - margin]
+        plate = read_background(background, filmed_height, filmed_width, recorded_size)
+        plate = plate[margin : margin + height, margin : margin + width]
         chosen = subtract_background(rgb, plate)
         mask_source = f"background subtraction (clean plate {background})"
     else:
@@ -278,11 +279,10 @@ def load_observation(
         found = estimate_camera(chosen, frame_dt, read_fov, fit_px, touch=touch)
         spec, estimate = found.camera, found.to_json()
     elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
-        spec = default_camera(width + 2 * margin, height + 2 * margin)
-        spec = spec.cropped(margin, margin, width, height) if margin else spec
+        spec = default_camera(filmed_width, filmed_height).cropped(margin, margin, width, height)
     else:
-        spec = read_camera(camera, *recorded_size).resized(width + 2 * margin, height + 2 * margin)
-        spec = spec.cropped(margin, margin, width, height) if margin else spec
+        spec = read_camera(camera, *recorded_size).resized(filmed_width, filmed_height)
+        spec = spec.cropped(margin, margin, width, height)
         check_camera_file(chosen, frame_dt, spec, fit_px)
     return Observation(
         recording=rgb,
@@ -295,7 +295,7 @@ def load_observation(
         recorded_fps=recorded_fps,
         recorded_frames=recorded,
         camera_estimate=estimate,
-        camera_shake=shake.to_json(margin > 0, margin),
+        camera_shake=shake.to_json(),
         black_backdrop=black,
         fall_fit_px=fit_px,
         start_s=start,

@@ -63,13 +63,14 @@ class Shake:
     def largest_px(self) -> float:
         return 0.0 if self.shifts is None else float(self.shifts.norm(dim=1).max())
 
-    def to_json(self, applied: bool, crop_px: int) -> dict:
+    def to_json(self) -> dict:
+        crop = crop_margin(self)
         return {
             "readable": self.shifts is not None,
             "tiles_read": self.tiles_read,
             "largest_shift_px": round(self.largest_px, 3),
-            "taken_out": applied,
-            "crop_px": crop_px,
+            "taken_out": crop > 0,
+            "crop_px": crop,
             "how": "the background's shift from frame 0, read in tiles (capture/stabilize.py); "
             f"taken out above {STILL_PX:g} px",
         }
