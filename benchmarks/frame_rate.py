@@ -30,7 +30,7 @@ from realistic_input import camera_errors
 
 import reconphys
 import reconphys.capture.observation as observation_module
-from reconphys.capture.calibrate import DEFAULT_FOV_DEG, SEGMENTER_FALL_FIT_PX
+from reconphys.capture.calibrate import SEGMENTER_FALL_FIT_PX
 from reconphys.capture.video import resample_indices
 from reconphys.data import DropDataset
 from reconphys.data.storage import video_name
@@ -67,9 +67,7 @@ def run(data: str, limit: int, search: bool) -> list[dict]:
                 continue
             predicted = np.array(list(result.observables.values()))
             masks, dt = result.observation.masks, result.observation.frame_dt
-            camera = camera_errors(
-                masks, item, {"frame_dt": dt}, DEFAULT_FOV_DEG, SEGMENTER_FALL_FIT_PX
-            )
+            camera = camera_errors(masks, item, {"frame_dt": dt}, None, SEGMENTER_FALL_FIT_PX)
             speed = np.linalg.norm(result.details["initial_velocity"]["linear_m_s"])
             rows.append(
                 {

@@ -18,7 +18,11 @@ taken as a user's recording (frames only):
   object's true lowest point in frame 0, at its pixel and the depth the estimate gives the
   object), metres: what decides when the simulated object lands.
 
-    python benchmarks/realistic_input.py data/real_other [--limit 40]
+``--aspect W:H`` cuts each clip to that shape about its centre first (a phone's 9:16 portrait
+frame from the data's square one; the true camera's principal point follows) and adds the rule
+before 2026-11-28 as a row: 45° vertical whatever the shape (``segmenter_45_vertical``).
+
+    python benchmarks/realistic_input.py data/real_other [--limit 40] [--aspect 9:16]
 """
 
 from __future__ import annotations
@@ -34,23 +38,40 @@ import torch
 from common import camera_read_errors, mean_mask_iou
 
 from reconphys.capture.calibrate import (
-    DEFAULT_FOV_DEG,
     FALL_FIT_PX,
     SEGMENTER_FALL_FIT_PX,
     estimate_camera,
 )
+from reconphys.capture.lens import default_fov_deg
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, segment_clip
 
 
-def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True) -> dict:
+def centre_cut(frames, truth, K, aspect: tuple[int, int] | None):
+    """Frames [T, H, W, 3], masks [T, H, W] and K [3, 3] cut about the centre to ``aspect``
+    (width, height); unchanged when None."""
+    if aspect is None:
+        return frames, truth, K
+    height, width = truth.shape[1:]
+    if width * aspect[1] > height * aspect[0]:  # too wide: keep the middle columns
+        keep_h, keep_w = height, round(height * aspect[0] / aspect[1])
+    else:
+        keep_h, keep_w = round(width * aspect[1] / aspect[0]), width
+    top, left = (height - keep_h) // 2, (width - keep_w) // 2
+    K = K.clone().double()
+    K[0, 2] -= left
+    K[1, 2] -= top
+    rows, cols = slice(top, top + keep_h), slice(left, left + keep_w)
+    return frames[:, rows, cols], truth[:, rows, cols], K
+
+
+def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True, K=None) -> dict:
     anchors = item["anchors"].double()  # [T, N_A, 3]
     estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg, fit_px, touch)
     lowest = anchors[0][anchors[0][:, 2].argmin()]  # frame 0's lowest point: the drop height
-    errors = camera_read_errors(
-        estimate, item["K"][0], item["world_to_cam"][0], anchors[0].mean(0), lowest
-    )
+    K = item["K"][0] if K is None else K
+    errors = camera_read_errors(estimate, K, item["world_to_cam"][0], anchors[0].mean(0), lowest)
     return {
         **errors,
         "contact_s": estimate.contact_s,
@@ -71,7 +92,9 @@ def main() -> None:
     parser.add_argument(
         "--max-side", type=int, default=MAX_SIDE, help="segment at most this size, px"
     )
+    parser.add_argument("--aspect", default=None, help="W:H: cut each clip to it (module doc)")
     args = parser.parse_args()
+    aspect = tuple(int(v) for v in args.aspect.split(":")) if args.aspect else None
     torch.set_num_threads(2)
     dataset = DropDataset(args.data, split=args.split, views=[0])
     model = load_mask_segmenter(args.segmenter)
@@ -81,6 +104,7 @@ def main() -> None:
     for index in range(count):
         item, meta = dataset[index], dataset.meta(index)
         frames, truth = item["frames"][0], dataset.masks(index)[0].float()
+        frames, truth, K = centre_cut(frames, truth, item["K"][0], aspect)
         tic = time.perf_counter()
         masks = segment_clip(model, frames, args.max_side)
         seconds = time.perf_counter() - tic
@@ -92,7 +116,7 @@ def main() -> None:
             "iou_median": mean_mask_iou(median, truth),
             "segment_seconds": seconds,
         }
-        fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(item["K"][0, 1, 1])))
+        fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(K[1, 1])))
         # as predict reads them (the ground from the first touch, else the rest); the last row
         # is the ground from the rest alone, the rule before the touch (for the record)
         for name, used, fov, fit_px, touch in (
@@ -100,9 +124,11 @@ def main() -> None:
             ("segmenter_true_fov", masks, fov_true, SEGMENTER_FALL_FIT_PX, True),
             ("segmenter_default_fov", masks, None, SEGMENTER_FALL_FIT_PX, True),
             ("segmenter_default_fov_rest", masks, None, SEGMENTER_FALL_FIT_PX, False),
+        ) + (
+            (("segmenter_45_vertical", masks, 45.0, SEGMENTER_FALL_FIT_PX, True),) if aspect else ()
         ):
             try:
-                row[name] = camera_errors(used, item, meta, fov, fit_px, touch)
+                row[name] = camera_errors(used, item, meta, fov, fit_px, touch, K)
             except InputError as e:
                 row[name] = {"refused": str(e)}
         rows.append(row)
@@ -131,12 +157,7 @@ def main() -> None:
         f"{ious.min():.3f}), temporal median {np.mean([r['iou_median'] for r in rows]):.3f}; "
         f"segmenter {np.mean([r['segment_seconds'] for r in rows]):.2f} s a clip"
     )
-    for name in (
-        "true_masks_true_fov",
-        "segmenter_true_fov",
-        "segmenter_default_fov",
-        "segmenter_default_fov_rest",
-    ):
+    for name in [n for n in rows[0] if isinstance(rows[0][n], dict)]:
         good = [r[name] for r in rows if "scale_error" in r[name]]
         refused = len(rows) - len(good)
         if not good:
@@ -158,7 +179,11 @@ def main() -> None:
             f"; the drop height's on {np.mean([lo <= t <= hi for lo, hi, t in drop]):.0%} "
             f"(mean width {100 * np.mean([hi - lo for lo, hi, _ in drop]):.1f} cm)"
         )
-    print(f"(default vertical field of view {DEFAULT_FOV_DEG}°)")
+    height, width = truth.shape[1:]
+    print(
+        f"(the default vertical field of view: {default_fov_deg(width, height):.1f}° at "
+        f"{width}×{height})"
+    )
     if args.out:
         with open(args.out, "w") as f:
             json.dump(rows, f, indent=1)

@@ -1,8 +1,9 @@
 """The camera and the ground from the recording itself, when no camera file is given.
 
 Assumptions (say so to the user): a static pinhole camera without roll, the principal point at
-the image centre, a vertical field of view ``fov_deg`` (default :data:`DEFAULT_FOV_DEG`, or the
-user's ``--fov``), and an object that falls freely for a few frames before it lands.
+the image centre, a vertical field of view ``fov_deg`` (the user's ``--fov``, the phone's lens
+from the video's metadata, else 45° across the shorter side: lens.py), and an object that falls
+freely for a few frames before it lands.
 
 1. **Scale from gravity.** While the object falls, its masks' centroid follows the projection of
    ``P(t) = P0 + V0·t + ½·g·t²`` in the camera frame, with ``g = 9.81 m/s² · (0, cos θ, sin θ)``
@@ -45,9 +46,9 @@ from torch import Tensor
 from ..errors import InputError
 from ..render.cameras import intrinsics_from_fov, look_at
 from .camera import CameraSpec
+from .lens import recording_fov
 from .placement import GRAVITY_MAGNITUDE, camera_centre, ray
 
-DEFAULT_FOV_DEG = 45.0  # vertical: a phone's main camera in landscape is about 40–50°
 PITCH_PRIOR_DEG = 15.0  # filmed from a little above the drop
 # Chosen on 40 realistic videos of held-out pybullet meshes (true masks, docs/usage.md): mean
 # scale error 5.6 / 5.0 / 5.4 % with a spread of 15 / 30 / 90°.
@@ -110,6 +111,7 @@ class CameraEstimate:
     touch: str = "soft"  # how the touch was modelled (TOUCHES)
     scale_spread: float = 0.0  # the size's (and distance's) error, log, one standard deviation
     drop_height: float = 0.0  # frame 0's lowest silhouette point above the ground read, metres
+    fov_from: str = "given (--fov)"  # where fov_deg came from (lens.recording_fov)
 
     @property
     def drop_height_spread(self) -> float:
@@ -132,7 +134,8 @@ class CameraEstimate:
     def to_json(self) -> dict:
         return {
             "source": "estimated from the video (gravity, and where the object lands)",
-            "fov_deg": self.fov_deg,
+            "fov_deg": round(self.fov_deg, 3),
+            "fov_from": self.fov_from,
             "pitch_deg": round(self.pitch_deg, 3),
             "camera_height_m": round(self.height, 4),
             "distance_m": round(self.distance, 4),
@@ -472,14 +475,14 @@ def object_depth(
 def estimate_camera(
     masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
     frame_dt: float,  # seconds between frames
-    fov_deg: float | None = None,  # vertical; None: DEFAULT_FOV_DEG
+    fov_deg: float | None = None,  # vertical; None: assumed (lens.recording_fov)
     fit_px: float = FALL_FIT_PX,  # the masks' pixel error: FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
     ground_from_touch: bool = True,  # False: from the rest only (the rule before the touch)
     touch: str = "soft",  # TOUCHES: how the object meets the ground (contact_time)
 ) -> CameraEstimate:
     """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
-    fov = DEFAULT_FOV_DEG if fov_deg is None else float(fov_deg)
     height_px, width_px = masks.shape[1:3]
+    fov, fov_from = recording_fov(fov_deg, None, width_px, height_px)
     K = intrinsics_from_fov(fov, width_px, height_px, dtype=torch.float64)
     f, cx, cy = float(K[0, 0]), float(K[0, 2]), float(K[1, 2])
     track = mask_track(masks)
@@ -535,6 +538,7 @@ def estimate_camera(
     estimate = CameraEstimate(
         camera=camera,
         fov_deg=fov,
+        fov_from=fov_from,
         pitch_deg=math.degrees(pitch),
         height=camera_height,
         distance=float(np.linalg.norm(params[:3])),

@@ -31,6 +31,7 @@ from ..errors import InputError
 from .calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX, check_camera_file, estimate_camera
 from .camera import CameraSpec, default_camera, read_camera
 from .interpolate import frames_between
+from .lens import recording_fov
 from .masks import (
     alpha_masks,
     backdrop_colour,
@@ -46,6 +47,7 @@ from .stabilize import MAX_SHAKE_SHARE, Shake, crop_margin, read_shake, steady
 from .video import (
     VIDEO_SUFFIXES,
     WORK_MAX_SIDE,
+    read_focal_35mm,
     read_frame_folder,
     read_video,
     resample_between,
@@ -220,8 +222,12 @@ def load_observation(
     # a hand-held camera: its shake read from the background and taken out (stabilize.py); a
     # one-colour border (a plain backdrop) shows no shake, and an object on it is not one
     shake = Shake(None, 0) if border_is_uniform(rgb) else read_shake(rgb)
-    margin, read_fov = crop_margin(shake), fov_deg
+    margin = crop_margin(shake)
     filmed_width, filmed_height = width, height  # before the crop (camera files, plates)
+    read_fov, fov_from = None, ""  # vertical, of the filmed frame: --fov, the lens, else assumed
+    if camera is None:
+        lens = read_focal_35mm(path) if fov_deg is None else None
+        read_fov, fov_from = recording_fov(fov_deg, lens, filmed_width, filmed_height)
     if shake.largest_px > MAX_SHAKE_SHARE * min(height, width):
         raise InputError(
             f"the camera moves: the background shifts by {shake.largest_px:.0f} px over the "
@@ -231,8 +237,8 @@ def load_observation(
         )
     if margin:
         rgb = steady(rgb, shake)
-        if fov_deg is not None:  # the user's field of view is the whole frame's
-            half = math.tan(math.radians(fov_deg) / 2) * (height - 2 * margin) / height
+        if read_fov is not None:  # the field of view is the whole frame's
+            half = math.tan(math.radians(read_fov) / 2) * (height - 2 * margin) / height
             read_fov = math.degrees(2 * math.atan(half))
         height, width = rgb.shape[1:3]
     if all_masks is not None:
@@ -277,6 +283,7 @@ def load_observation(
     estimate = None
     if camera is None:  # from the video: gravity's scale, the ground where it touches or rests
         found = estimate_camera(chosen, frame_dt, read_fov, fit_px, touch=touch)
+        found.fov_from = fov_from + (" (narrowed to the steadied crop)" if margin else "")
         spec, estimate = found.camera, found.to_json()
     elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
         spec = default_camera(filmed_width, filmed_height).cropped(margin, margin, width, height)

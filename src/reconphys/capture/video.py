@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from ..render.video import FOCAL_35MM_KEY
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v", ".gif")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
@@ -115,6 +117,55 @@ def read_video(
     return np.stack(frames), fps, times, sizes.pop()
 
 
+# The 35 mm-equivalent focal length in a recording's metadata: a phone's video (the QuickTime
+# key iPhones write), a frame folder's first image (EXIF FocalLengthIn35mmFilm)
+FOCAL_35MM_KEYS = (FOCAL_35MM_KEY,)
+_EXIF_IFD, _EXIF_FOCAL_35MM = 0x8769, 0xA405
+
+
+def _ffmetadata_value(text: str, key: str) -> str | None:
+    """``key``'s value in ffmpeg's FFMETADATA1 text (global section, escapes undone)."""
+    for line in text.splitlines():
+        if line.startswith("["):  # a stream's or a chapter's section: the global one is over
+            break
+        name, sep, value = line.partition("=")
+        if sep and name == key:
+            return re.sub(r"\\(.)", r"\1", value)
+    return None
+
+
+def read_focal_35mm(path: str | os.PathLike) -> float | None:
+    """The 35 mm-equivalent focal length (mm) a recording's metadata carries, or None: a video's
+    :data:`FOCAL_35MM_KEYS` (read by ffmpeg), a frame folder's first image's EXIF. Never raises:
+    metadata that is absent or unreadable is None (the field of view is then assumed)."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            from PIL import Image
+
+            files = list_images(path)
+            if not files:
+                return None
+            with Image.open(files[0]) as image:
+                value = image.getexif().get_ifd(_EXIF_IFD).get(_EXIF_FOCAL_35MM)
+        elif path.suffix.lower() in VIDEO_SUFFIXES and path.suffix.lower() != ".gif":
+            import subprocess
+
+            import imageio_ffmpeg
+
+            command = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path)]
+            command += ["-f", "ffmetadata", "-"]
+            run = subprocess.run(command, capture_output=True, text=True, timeout=30)
+            values = (_ffmetadata_value(run.stdout, key) for key in FOCAL_35MM_KEYS)
+            value = next((v for v in values if v is not None), None)
+        else:
+            return None
+        focal = float(value) if value is not None else None
+    except Exception:  # metadata is a hint: a file ffmpeg or PIL cannot read has none
+        return None
+    return focal if focal is not None and math.isfinite(focal) and focal > 0 else None
+
+
 ON_FRAME_S = 1e-3  # a wanted time this close to a recorded frame reads that frame as it is
 # A recording is read at most this many pixels on its longer side (area-averaged down): every
 # model reads far less (the segmenter 128 px, the crops 32–48 px, the search 64 px), and a 1080p
@@ -164,8 +215,6 @@ def _check_span(start: float, stop: float) -> None:
 
 def list_images(folder: str | os.PathLike) -> list[Path]:
     """Image files of a folder in natural order (frame_2 before frame_10)."""
-    import re
-
     folder = Path(folder)
     files = [p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()]
 

@@ -217,14 +217,21 @@ def data_video(
     sample: str = typer.Argument(..., help="Sample id (see manifest.json)."),
     out: Path = typer.Argument(..., help="Folder to write video.mp4, camera.json, gaussians.ply."),
     view: int = typer.Option(0, help="View 0–3."),
+    lens: bool = typer.Option(
+        False,
+        help="Write the camera's 35 mm-equivalent focal length into video.mp4's metadata, as a "
+        "phone does (predict then reads the field of view from it).",
+    ),
     overwrite: bool = typer.Option(False, help="Replace an existing folder."),
 ):
     """Write one sample as a user would bring it to `reconphys predict`: its encoded video
     (view_V.mp4), the camera file and the object's Gaussians placed as in frame 0."""
     from ..assets.ply import write_ply
     from ..capture import CameraSpec, write_camera
+    from ..capture.lens import focal_35mm_from_pixels
     from ..data.dataset import DropDataset
     from ..data.storage import video_name
+    from ..render.video import FOCAL_35MM_KEY, copy_with_metadata
 
     if not 0 <= view < 4:
         raise InputError(f"expected 0–3, got {view}", field="--view")
@@ -239,7 +246,11 @@ def data_video(
     height, width = item["frames"].shape[2:4]
     camera = CameraSpec(item["K"][0].double(), item["world_to_cam"][0].double(), width, height)
     with atomic_folder(out, overwrite=overwrite) as staging:
-        shutil.copyfile(video, staging / "video.mp4")
+        if lens:  # an iPhone writes a whole number of millimetres
+            focal = focal_35mm_from_pixels(float(camera.K[1, 1]), width, height)
+            copy_with_metadata(video, staging / "video.mp4", {FOCAL_35MM_KEY: f"{focal:.0f}"})
+        else:
+            shutil.copyfile(video, staging / "video.mp4")
         write_camera(staging / "camera.json", camera)
         write_ply(staging / "gaussians.ply", dataset.asset(index).gaussians)
         (staging / "truth.json").write_text(

@@ -52,7 +52,9 @@ def predict_command(
         "touches, or else where it rests; needs ≥ 4 frames of fall).",
     ),
     fov: float = typer.Option(
-        None, help="Vertical field of view, degrees, for the estimated camera (default 45)."
+        None,
+        help="Vertical field of view, degrees, for the estimated camera (default: the phone's "
+        "lens from the video's metadata, else 45° across the shorter side).",
     ),
     touch: str = typer.Option(
         "soft",
@@ -176,8 +178,9 @@ def predict_command(
     if estimate is not None:
         low, high = estimate["size_factor_10_90"]
         typer.echo(
-            f"camera read from the video (fov {estimate['fov_deg']:g}° assumed or given): the "
-            f"object's size and speeds are known to ×{low:.2f}–×{high:.2f} (10–90 %)"
+            f"camera read from the video (vertical fov {estimate['fov_deg']:.1f}°, "
+            f"{estimate['fov_from']}): the object's size and speeds are known to "
+            f"×{low:.2f}–×{high:.2f} (10–90 %)"
             + ("; give --camera FILE for more" if high > 1.25 else "")
         )
         drop_low, drop_high = estimate["drop_height_m_10_90"]

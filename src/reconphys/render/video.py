@@ -15,6 +15,10 @@ from torch import Tensor
 
 from ..io import atomic_file
 
+# QuickTime metadata key an iPhone writes into its videos: the lens's 35 mm-equivalent focal
+# length, mm (capture/lens.py reads the field of view from it)
+FOCAL_35MM_KEY = "com.apple.quicktime.camera.focal_length.35mm_equivalent"
+
 
 def to_uint8(
     images: Tensor,  # [..., H, W, 3] floats in [0, 1]
@@ -49,6 +53,26 @@ def write_mp4(
             for frame in frames:
                 writer.append_data(frame)
     return path
+
+
+def copy_with_metadata(
+    source: str | os.PathLike, target: str | os.PathLike, metadata: dict[str, str]
+) -> Path:
+    """Copy a video file (the streams as they are, no re-encoding) with ``metadata`` added as
+    QuickTime keys (what a phone writes, e.g. :data:`FOCAL_35MM_KEY`), atomically."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    target = Path(target)
+    tags = [arg for key, value in metadata.items() for arg in ("-metadata", f"{key}={value}")]
+    with atomic_file(target) as tmp:
+        command = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-i", str(source)]
+        command += ["-c", "copy", "-movflags", "use_metadata_tags", *tags, str(tmp)]
+        run = subprocess.run(command, capture_output=True, text=True, timeout=120)
+        if run.returncode != 0:
+            raise RuntimeError(f"ffmpeg could not copy {source}: {run.stderr.strip()[:200]}")
+    return target
 
 
 def compress_video(
