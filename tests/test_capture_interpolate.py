@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+import reconphys.capture.video as video_module
 from reconphys.capture import load_observation
 from reconphys.capture.interpolate import frames_between
 from reconphys.capture.video import resample_between, resample_indices
@@ -105,3 +106,44 @@ def test_a_30_fps_video_reads_as_the_fall_at_the_simulators_times(tmp_path, fps)
     assert ("between" in observation.time_resampling) == (fps == 30.0)
     for j, mask in enumerate(observation.masks[:15]):
         assert np.abs(_centroid(mask) - _falling_centre(j * FRAME_DT)).max() < 0.5
+
+
+def test_a_variable_rate_video_reads_each_frame_at_its_own_time(tmp_path, monkeypatch):
+    """A phone that drops to 15 fps part-way (and skips two frames at 30): ffmpeg's frames of
+    a variable-rate mp4 are read one for one at their own times (video.decoded_times), so the
+    frames at the simulator's times show the disc where the fall puts it. Read at one mean
+    rate instead (as before), the same video puts it pixels off, and this test sees it."""
+    ticks = np.concatenate([np.arange(0, 8), [9, 10, 12, 13], np.arange(14, 19, 2)])  # 1/30 s
+    t = ticks / 30.0
+    assert video_module.variable_rate(t)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for k in range(int(ticks.max()) + 1):  # every 1/30 s; the kept ones chosen below
+        disc = _disc(_falling_centre(k / 30.0), 5.0)
+        imageio.imwrite(
+            frames / f"{k:03d}.png", (np.repeat(disc[..., None], 3, -1) * 230).astype(np.uint8)
+        )
+    keep = "+".join(f"eq(n\\,{k})" for k in ticks)
+    path = tmp_path / "variable.mp4"
+    command = ["-v", "error", "-framerate", "30", "-i", str(frames / "%03d.png")]
+    command += ["-vf", f"select={keep}", "-fps_mode", "passthrough", "-c:v", "libx264"]
+    command += ["-qp", "0", "-pix_fmt", "yuv444p", str(path)]
+    assert video_module._ffmpeg(command).returncode == 0
+    stamps = video_module.read_video(path)[4]
+    assert stamps is not None and np.abs(stamps - t).max() < 1e-3
+    observation = load_observation(path, camera="dataset")
+    assert "variable frame rate (33–67 ms" in observation.time_resampling
+    count = int(t[-1] / FRAME_DT) + 1
+    errors = [
+        np.abs(_centroid(mask) - _falling_centre(j * FRAME_DT)).max()
+        for j, mask in enumerate(observation.masks[:count])
+    ]
+    assert max(errors) < 0.5
+    monkeypatch.setattr(video_module, "variable_rate", lambda times: False)
+    before = load_observation(path, camera="dataset")
+    assert "variable" not in before.time_resampling
+    errors = [
+        np.abs(_centroid(mask) - _falling_centre(j * FRAME_DT)).max()
+        for j, mask in enumerate(before.masks[:count])
+    ]
+    assert max(errors) > 2.0

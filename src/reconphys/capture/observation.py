@@ -184,12 +184,14 @@ def load_observation(
     # decode no further than that, unless a mask folder must match the recording frame for frame
     until = None if masks is not None else read_end
     side = AUTO_MAX_SIDE if auto else WORK_MAX_SIDE  # a phone's 1080p: read smaller
-    times = None
+    times = stamps = None
     if path.is_dir():
         count = None if until is None else math.ceil(until * (fps or 1.0 / frame_dt)) + 1
         (raw, recorded_size), recorded_fps = read_frame_folder(path, count, side), None
     elif path.suffix.lower() in VIDEO_SUFFIXES:
-        raw, recorded_fps, times, recorded_size = read_video(path, None if fps else until, side)
+        raw, recorded_fps, times, recorded_size, stamps = read_video(
+            path, None if fps else until, side
+        )
     else:
         raise InputError(
             f"expected a video ({', '.join(VIDEO_SUFFIXES)}) or a folder of frames",
@@ -200,7 +202,10 @@ def load_observation(
         after, weight = before, np.zeros(len(before))
     else:  # between two recorded frames where the rates differ (30 fps: interpolate.py)
         rate = fps or recorded_fps or 1.0 / frame_dt
-        before, after, weight = resample_between(raw.shape[0], rate, frame_dt, start, read_end)
+        stamps = None if fps else stamps  # a variable-rate video: each frame at its own time
+        before, after, weight = resample_between(
+            raw.shape[0], rate, frame_dt, start, read_end, stamps
+        )
     between = weight > 0
     # the recorded frames used: each wanted one's, or the pairs it lies between
     picks = np.unique(np.concatenate([before, after])) if between.any() else before
@@ -271,6 +276,12 @@ def load_observation(
         )
     else:
         objects = rgb * chosen[..., None]
+    if stamps is not None:  # say so: a phone that changed its frame rate while filming
+        steps = 1000 * np.diff(stamps)
+        time_resampling += (
+            f"; a variable frame rate ({steps.min():.0f}–{steps.max():.0f} ms between frames): "
+            "each recorded frame at its own time"
+        )
     check_masks(chosen, str(masks) if masks is not None else str(path))
     if auto:  # held still first: read the recording again from the release (or the start)
         release = release_time(chosen, frame_dt)

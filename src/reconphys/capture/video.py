@@ -62,14 +62,67 @@ def _read_gif(path: Path) -> tuple[list[np.ndarray], np.ndarray]:
     return frames, np.concatenate([[0.0], np.cumsum(durations)])
 
 
+# A video whose frame intervals stray this far from their median is read at its frames' own
+# times (a phone that drops its frame rate in low light), not at a constant rate
+VARIABLE_RATE_SHARE = 0.25
+
+
+def _ffmpeg(arguments: list[str], timeout: float = 120.0):
+    import subprocess
+
+    import imageio_ffmpeg
+
+    command = [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", *arguments]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+
+
+def packet_times(path: str | os.PathLike) -> np.ndarray | None:
+    """Presentation times (seconds, sorted) of a video file's first video stream's packets, read
+    without decoding (ffmpeg's framecrc muxer); None when ffmpeg cannot list them."""
+    run = _ffmpeg(
+        ["-v", "error", "-i", str(path), "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"]
+    )
+    base = re.search(r"^#tb 0: (\d+)/(\d+)", run.stdout, re.MULTILINE)
+    if run.returncode != 0 or base is None:
+        return None
+    rows = re.findall(r"^0,\s*-?\d+,\s*(-?\d+),", run.stdout, re.MULTILINE)
+    return np.sort(np.array([int(r) for r in rows], dtype=np.float64)) * int(base[1]) / int(base[2])
+
+
+def variable_rate(times: np.ndarray) -> bool:
+    """Whether frames at ``times`` [T] (seconds) are not evenly spaced (a variable-rate video):
+    some interval differs from the median one by more than :data:`VARIABLE_RATE_SHARE` of it."""
+    steps = np.diff(times)
+    if steps.size < 2:
+        return False
+    median = float(np.median(steps))
+    return median > 0 and bool(np.any(np.abs(steps - median) > VARIABLE_RATE_SHARE * median))
+
+
+def decoded_times(path: str | os.PathLike, until: float | None = None) -> np.ndarray:
+    """Presentation times (seconds) of a video's frames as ffmpeg decodes them one for one (no
+    frame repeated or dropped: ``-fps_mode passthrough``), read by its showinfo filter; with
+    ``until``, those of the first ``until`` + 1 seconds."""
+    arguments = ["-i", str(path), "-map", "0:v:0", "-fps_mode", "passthrough", "-vf", "showinfo"]
+    if until is not None:
+        arguments += ["-t", f"{until + 1.0:.6f}"]
+    run = _ffmpeg(["-v", "info", *arguments, "-f", "null", "-"])
+    found = re.findall(r"Parsed_showinfo.*?\bpts_time:\s*(-?[\d.]+)", run.stderr)
+    if run.returncode != 0 or not found:
+        raise InputError("cannot read the frames' times (ffmpeg showinfo)", source=str(path))
+    return np.array([float(t) for t in found])
+
+
 def read_video(
     path: str | os.PathLike, until: float | None = None, max_side: int | None = None
-) -> tuple[np.ndarray, float | None, np.ndarray | None, tuple[int, int]]:
+) -> tuple[np.ndarray, float | None, np.ndarray | None, tuple[int, int], np.ndarray | None]:
     """The frames of a video file → ([T, H, W, 3|4] uint8, frames per second or None, display
-    times [T + 1] seconds for variable-rate files (GIF) or None, (width, height) as recorded).
-    ``until`` (seconds): stop decoding after the first frame at or past it; ``max_side``: each
-    frame area-averaged to at most that many pixels a side as it is decoded (:func:`fit_within`)
-    — a long 1080p phone clip is never held in memory whole.
+    times [T + 1] seconds for GIF (a frame held on screen until the next) or None, (width,
+    height) as recorded, and for a variable-rate video (:func:`variable_rate`) the time of
+    each frame [T], seconds from the first, else None; its frames per second is then their
+    mean rate). ``until`` (seconds): stop decoding after the first frame at or past it;
+    ``max_side``: each frame area-averaged to at most that many pixels a side as it is decoded
+    (:func:`fit_within`) — a long 1080p phone clip is never held in memory whole.
 
     GIF keeps its alpha channel when it has transparency. Raises InputError (one line naming the
     file) for a missing or unreadable file and for a video without frames.
@@ -80,7 +133,7 @@ def read_video(
     source = str(path)
     if not path.is_file():
         raise InputError("video file not found", source=source)
-    fps, times = None, None
+    fps, times, stamps = None, None, None
     frames, sizes = [], set()
 
     def keep(frame: np.ndarray) -> None:
@@ -94,10 +147,18 @@ def read_video(
             for frame in raw:
                 keep(frame)
         else:
-            with imageio.get_reader(path, format="FFMPEG") as reader:
+            packets = packet_times(path)
+            options = {}
+            if packets is not None and variable_rate(packets):  # each frame at its own time
+                stamps = decoded_times(path, until)
+                stamps = stamps - stamps[0]
+                options["output_params"] = ["-fps_mode", "passthrough"]
+            with imageio.get_reader(path, format="FFMPEG", **options) as reader:
                 fps = reader.get_meta_data().get("fps")
                 last = None
-                if until is not None and fps and np.isfinite(fps) and fps > 0:
+                if until is not None and stamps is not None:
+                    last = int(np.searchsorted(stamps, until - 1e-6))
+                elif until is not None and fps and np.isfinite(fps) and fps > 0:
                     last = math.ceil(until * fps - 1e-6)  # the first frame at or past `until`
                 for frame in reader:
                     keep(frame)
@@ -114,7 +175,16 @@ def read_video(
         raise InputError("frames of different sizes", source=source)
     frames = _same_channels(frames)
     fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
-    return np.stack(frames), fps, times, sizes.pop()
+    if stamps is not None:
+        if len(stamps) < len(frames):
+            raise InputError(
+                f"ffmpeg gave {len(frames)} frames but the times of {len(stamps)}", source=source
+            )
+        stamps = stamps[: len(frames)]
+        if np.any(np.diff(stamps) <= 0):
+            raise InputError("frames whose times do not increase", source=source)
+        fps = (len(stamps) - 1) / float(stamps[-1]) if stamps[-1] > 0 else None
+    return np.stack(frames), fps, times, sizes.pop(), stamps
 
 
 # The 35 mm-equivalent focal length in a recording's metadata: a phone's video (the QuickTime
@@ -267,24 +337,35 @@ def read_frame_folder(
 
 
 def resample_between(
-    num_frames: int, fps: float, frame_dt: float, start: float = 0.0, end: float | None = None
+    num_frames: int,
+    fps: float,
+    frame_dt: float,
+    start: float = 0.0,
+    end: float | None = None,
+    stamps: np.ndarray | None = None,  # [num_frames] each frame's time, s (variable rate)
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The times start, start + frame_dt, ... (seconds into a recording of ``num_frames`` at
-    ``fps``, as long as they lie inside it and before ``end``) between recorded frames:
-    ``(before [J], after [J], weight [J])``, the frame at or before each time, the one after, and
-    the share of the later one in [0, 1). A time within :data:`ON_FRAME_S` of a recorded frame
-    takes it alone (before = after, weight 0): a recording at 1 / ``frame_dt`` (or a multiple)
-    reads exactly its own frames. At 30 fps the times fall between frames; reading the nearest
-    one instead would put each frame up to 17 ms off its time (5 cm at 3 m/s)."""
+    ``fps``, or at ``stamps`` when given, as long as they lie inside it and before ``end``)
+    between recorded frames: ``(before [J], after [J], weight [J])``, the frame at or before
+    each time, the one after, and the share of the later one in [0, 1) (the time's share of
+    the interval between them). A time within :data:`ON_FRAME_S` of a recorded frame takes it
+    alone (before = after, weight 0): a recording at 1 / ``frame_dt`` (or a multiple) reads
+    exactly its own frames. At 30 fps the times fall between frames; reading the nearest one
+    instead would put each frame up to 17 ms off its time (5 cm at 3 m/s)."""
     if not (np.isfinite(fps) and fps > 0):
         raise InputError(f"must be a positive frame rate, got {fps}", field="--fps")
-    duration = (num_frames - 1) / fps
-    stop = duration if end is None else min(end, duration)
+    if stamps is None:
+        stamps = np.arange(num_frames) / fps
+    stamps = np.asarray(stamps, dtype=np.float64)
+    if stamps.shape != (num_frames,) or np.any(np.diff(stamps) <= 0):
+        raise ValueError(f"stamps: expected {num_frames} increasing times, got {stamps.shape}")
+    stop = float(stamps[-1]) if end is None else min(end, float(stamps[-1]))
     _check_span(start, stop + 1e-9)
     count = int(np.floor((stop - start) / frame_dt + 1e-6)) + 1
-    position = (start + np.arange(count) * frame_dt) * fps  # [J] in recorded frames
-    nearest = np.round(position)
-    on_frame = np.abs(position - nearest) < ON_FRAME_S * fps
+    targets = start + np.arange(count) * frame_dt  # [J] seconds
+    position = np.interp(targets, stamps, np.arange(num_frames, dtype=np.float64))  # in frames
+    nearest = np.round(position).astype(np.int64).clip(0, num_frames - 1)
+    on_frame = np.abs(targets - stamps[nearest]) < ON_FRAME_S
     before = np.where(on_frame, nearest, np.floor(position)).astype(np.int64)
     before = np.clip(before, 0, num_frames - 1)
     after = np.where(on_frame, before, np.minimum(before + 1, num_frames - 1))
