@@ -45,12 +45,13 @@ def ball_masks(
     size: int = 96,
     fov=45.0,
     braking_g: float | None = None,
+    dt: float = 0.03,
 ):
     """Masks [30, size, size] of a ball released from rest ``drop`` m above the ground, landing
     as :func:`ball_heights` says, seen by a camera pitched down by ``pitch_deg`` aimed at its
     landing point from ``distance`` m; returns the masks, the camera's world_to_cam and the
     ball's path."""
-    heights = ball_heights(drop, radius, braking_g)
+    heights = ball_heights(drop, radius, braking_g, dt)
     centres = np.array([[0.0, 0.0, z] for z in heights])
     pitch = math.radians(pitch_deg)
     target = np.array([0.0, 0.0, radius + 0.5 * drop])
@@ -398,3 +399,17 @@ def test_rest_depth_is_where_the_ray_meets_the_ground():
     masks[-1] = 0
     masks[-1, 0:4, 28:36] = 1  # above the horizon
     assert rest_depth(masks, CameraSpec(K, w2c, 64, 64)) is None
+
+
+def test_a_slow_motion_video_is_refused_with_its_cause_and_read_with_its_real_rate():
+    """A drop filmed at 4 × 0.03 s⁻¹ and played at 1 / 0.03 s (slow motion, 4× slower) shows
+    gravity 16× weaker: its 0.24-m ball reads as 3.8 m across and is refused with a message that
+    names slow motion and --fps; read at the real 0.0075 s a frame it comes back at its distance
+    (to 30 %: its 30 frames hold only 0.22 s of the fall, against 16× read slowed)."""
+    radius, distance = 0.12, 2.0
+    masks, w2c, _ = ball_masks(15.0, distance, 1.5, radius, dt=0.03 / 4)
+    with pytest.raises(InputError, match="slow-motion video: its real frame rate with --fps"):
+        estimate_camera(masks, 0.03, fov_deg=45.0)
+    estimate = estimate_camera(masks, 0.03 / 4, fov_deg=45.0, ground_from_touch=False)
+    centre_0 = w2c[:3, :3] @ np.array([0.0, 0.0, radius + 1.5]) + w2c[:3, 3]
+    assert estimate.distance == pytest.approx(float(np.linalg.norm(centre_0)), rel=0.3)

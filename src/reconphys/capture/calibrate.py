@@ -94,6 +94,11 @@ MAX_SIZE_FACTOR = 3.0
 # of 2–8 cm whose intervals held the truth on 80 % (docs/usage.md "How well the drop height is
 # known"); a pixel-based floor held less on another engine's drops at the same width
 DROP_HEIGHT_ERROR_FLOOR_M = 0.06
+# What a user can give when the fall does not show the scale. A slow-motion video played at 30
+# fps shows gravity k² times weaker (k× slower): its object reads k² times its size, or no fall
+GIVE_CAMERA = (
+    "give the camera with --camera FILE (a slow-motion video: its real frame rate with --fps)"
+)
 
 
 @dataclass
@@ -295,7 +300,7 @@ def _fit_fall(
     if not 2 * c2 > 0.2 * fy * GRAVITY_MAGNITUDE / 100.0:  # slower than g at 100 m: no fall seen
         raise InputError(
             "the object does not accelerate downwards in the first frames: the video does not "
-            "show a free fall to read the scale from; give the camera with --camera FILE",
+            f"show a free fall to read the scale from; {GIVE_CAMERA}",
             source="camera from the video",
         )
     pitch0 = math.radians(PITCH_PRIOR_DEG)
@@ -347,7 +352,7 @@ def _free_fall_frames(track: _Track, frame_dt: float, fit_px: float) -> int:
     if count < MIN_FALL_FRAMES:
         raise InputError(
             f"the object falls freely in {count} frame(s) (fewer than {MIN_FALL_FRAMES}): the "
-            "video does not show the scale; give the camera with --camera FILE",
+            f"video does not show the scale; {GIVE_CAMERA}",
             source="camera from the video",
         )
     return count
@@ -496,8 +501,8 @@ def estimate_camera(
         raise InputError(
             f"the fall read from the masks makes the object {size:.3g} m across, "
             f"{float(params[2]):.3g} m away (more than {MAX_READ_SIZE_M:g} m across): the masks "
-            "do not follow a falling object; give the camera with --camera FILE, or the masks "
-            "with --masks DIR",
+            "do not follow a falling object, or the video plays slower than it was filmed; "
+            f"{GIVE_CAMERA}, or the masks with --masks DIR",
             source="camera from the video",
         )
     below = (track.bottom[0] - track.centroid[0, 1]) * metres_per_px  # frame 0: centre to bottom
