@@ -13,6 +13,7 @@ import reconphys.capture.video as video_module
 from reconphys.capture import load_observation
 from reconphys.capture.interpolate import frames_between
 from reconphys.capture.video import resample_between, resample_indices
+from reconphys.render.video import copy_with_metadata
 
 FRAME_DT = 0.03
 SIZE = 64
@@ -147,3 +148,26 @@ def test_a_variable_rate_video_reads_each_frame_at_its_own_time(tmp_path, monkey
         for j, mask in enumerate(before.masks[:count])
     ]
     assert max(errors) > 2.0
+
+
+def test_a_slow_motion_video_is_read_at_the_rate_the_phone_filmed_at(tmp_path):
+    """Android's slow motion: filmed at 120 fps, written to play at 30 (the fall 4× slower),
+    the filmed rate in the metadata (com.android.capture.fps). Read at 120 fps the frames at the
+    simulator's times show the disc where the fall puts it, and prediction.json says why;
+    without the tag the same file reads a fall 4× too slow."""
+    t = np.arange(80) / 120.0
+    video = [
+        (np.repeat(_disc(_falling_centre(s), 5.0)[..., None], 3, -1) * 230).astype(np.uint8)
+        for s in t
+    ]
+    played = tmp_path / "played.mp4"
+    imageio.mimwrite(played, video, fps=30.0, codec="libx264", quality=10, macro_block_size=1)
+    tagged = copy_with_metadata(played, tmp_path / "slow.mp4", {"com.android.capture.fps": "120"})
+    assert video_module.slow_motion_rate(tagged) == pytest.approx((120.0, 30.0))
+    assert video_module.slow_motion_rate(played) is None
+    observation = load_observation(tagged, camera="dataset")
+    assert "filmed at 120 fps and played at 30 (slow motion" in observation.time_resampling
+    for j, mask in enumerate(observation.masks[:20]):
+        assert np.abs(_centroid(mask) - _falling_centre(j * FRAME_DT)).max() < 0.5
+    slowed = load_observation(played, camera="dataset")
+    assert np.abs(_centroid(slowed.masks[19]) - _falling_centre(19 * FRAME_DT)).max() > 10

@@ -52,6 +52,7 @@ from .video import (
     read_video,
     resample_between,
     resample_times,
+    slow_motion_rate,
 )
 
 DATASET_CAMERA = "dataset"  # --camera dataset: the dataset's view 0 (docs/design.md#conventions)
@@ -184,13 +185,17 @@ def load_observation(
     # decode no further than that, unless a mask folder must match the recording frame for frame
     until = None if masks is not None else read_end
     side = AUTO_MAX_SIDE if auto else WORK_MAX_SIDE  # a phone's 1080p: read smaller
-    times = stamps = None
+    times = stamps = slowed = None
     if path.is_dir():
         count = None if until is None else math.ceil(until * (fps or 1.0 / frame_dt)) + 1
         (raw, recorded_size), recorded_fps = read_frame_folder(path, count, side), None
     elif path.suffix.lower() in VIDEO_SUFFIXES:
+        slowed = None if fps else slow_motion_rate(path)  # (filmed at, plays at) fps
+        if slowed is not None:  # the phone's slow motion: read at the rate it filmed at
+            fps = slowed[0]
+            until = None if until is None else until * slowed[0] / slowed[1]
         raw, recorded_fps, times, recorded_size, stamps = read_video(
-            path, None if fps else until, side
+            path, None if fps and slowed is None else until, side
         )
     else:
         raise InputError(
@@ -276,6 +281,11 @@ def load_observation(
         )
     else:
         objects = rgb * chosen[..., None]
+    if slowed is not None:
+        time_resampling += (
+            f"; filmed at {slowed[0]:g} fps and played at {slowed[1]:g} (slow motion, the "
+            f"video's metadata): read at {slowed[0]:g} fps"
+        )
     if stamps is not None:  # say so: a phone that changed its frame rate while filming
         steps = 1000 * np.diff(stamps)
         time_resampling += (

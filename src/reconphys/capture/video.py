@@ -190,6 +190,10 @@ def read_video(
 # The 35 mm-equivalent focal length in a recording's metadata: a phone's video (the QuickTime
 # key iPhones write), a frame folder's first image (EXIF FocalLengthIn35mmFilm)
 FOCAL_35MM_KEYS = (FOCAL_35MM_KEY,)
+# The rate a phone filmed at, where it differs from the rate the file plays at (Android writes it
+# for its slow-motion videos); beyond this ratio either way the filmed rate is the real one
+CAPTURE_FPS_KEYS = ("com.android.capture.fps",)
+SLOW_MOTION_RATIO = 1.5
 _EXIF_IFD, _EXIF_FOCAL_35MM = 0x8769, 0xA405
 
 
@@ -204,36 +208,55 @@ def _ffmetadata_value(text: str, key: str) -> str | None:
     return None
 
 
+def _video_tag(path: Path, keys: tuple[str, ...]) -> float | None:
+    """The first of ``keys`` in a video file's global metadata (ffmpeg's ffmetadata), as a
+    positive number, or None (absent, not a number, or a file ffmpeg cannot read)."""
+    if path.suffix.lower() not in VIDEO_SUFFIXES or path.suffix.lower() == ".gif":
+        return None
+    try:
+        run = _ffmpeg(["-v", "error", "-i", str(path), "-f", "ffmetadata", "-"], timeout=30)
+        values = (_ffmetadata_value(run.stdout, key) for key in keys)
+        number = float(next(v for v in values if v is not None))
+    except Exception:  # metadata is a hint: absent or unreadable is None
+        return None
+    return number if math.isfinite(number) and number > 0 else None
+
+
 def read_focal_35mm(path: str | os.PathLike) -> float | None:
     """The 35 mm-equivalent focal length (mm) a recording's metadata carries, or None: a video's
     :data:`FOCAL_35MM_KEYS` (read by ffmpeg), a frame folder's first image's EXIF. Never raises:
     metadata that is absent or unreadable is None (the field of view is then assumed)."""
     path = Path(path)
+    if not path.is_dir():
+        return _video_tag(path, FOCAL_35MM_KEYS)
     try:
-        if path.is_dir():
-            from PIL import Image
+        from PIL import Image
 
-            files = list_images(path)
-            if not files:
-                return None
-            with Image.open(files[0]) as image:
-                value = image.getexif().get_ifd(_EXIF_IFD).get(_EXIF_FOCAL_35MM)
-        elif path.suffix.lower() in VIDEO_SUFFIXES and path.suffix.lower() != ".gif":
-            import subprocess
-
-            import imageio_ffmpeg
-
-            command = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path)]
-            command += ["-f", "ffmetadata", "-"]
-            run = subprocess.run(command, capture_output=True, text=True, timeout=30)
-            values = (_ffmetadata_value(run.stdout, key) for key in FOCAL_35MM_KEYS)
-            value = next((v for v in values if v is not None), None)
-        else:
+        files = list_images(path)
+        if not files:
             return None
-        focal = float(value) if value is not None else None
-    except Exception:  # metadata is a hint: a file ffmpeg or PIL cannot read has none
+        with Image.open(files[0]) as image:
+            focal = float(image.getexif().get_ifd(_EXIF_IFD).get(_EXIF_FOCAL_35MM))
+    except Exception:
         return None
-    return focal if focal is not None and math.isfinite(focal) and focal > 0 else None
+    return focal if math.isfinite(focal) and focal > 0 else None
+
+
+def slow_motion_rate(path: str | os.PathLike) -> tuple[float, float] | None:
+    """(the rate a phone filmed at, the rate its file plays at), frames per second, when a
+    video's metadata says it was filmed at another rate than it plays (Android's slow motion,
+    :data:`CAPTURE_FPS_KEYS`: filmed at 120 or 240 fps, played at 30) by more than
+    :data:`SLOW_MOTION_RATIO`; else None. The file's rate: its packets' median interval."""
+    path = Path(path)
+    captured = _video_tag(path, CAPTURE_FPS_KEYS)
+    if captured is None:
+        return None
+    packets = packet_times(path)
+    if packets is None or len(packets) < 2:
+        return None
+    played = 1.0 / float(np.median(np.diff(packets)))
+    ratio = captured / played
+    return (captured, played) if max(ratio, 1 / ratio) > SLOW_MOTION_RATIO else None
 
 
 ON_FRAME_S = 1e-3  # a wanted time this close to a recorded frame reads that frame as it is
