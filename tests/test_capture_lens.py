@@ -6,6 +6,7 @@ recording (load_observation)."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -21,6 +22,7 @@ from reconphys.capture.lens import (
     recording_fov,
 )
 from reconphys.capture.video import read_focal_35mm
+from reconphys.errors import InputError
 from reconphys.render.video import FOCAL_35MM_KEY, copy_with_metadata, write_mp4
 
 
@@ -113,3 +115,24 @@ def test_predict_reads_the_lens_from_a_phone_video_and_a_frame_folders_exif(tmp_
     broken = tmp_path / "broken.mp4"
     broken.write_bytes(b"not a video")
     assert read_focal_35mm(broken) is None and read_focal_35mm(tmp_path / "missing.mov") is None
+
+
+def test_a_camera_file_with_only_k_gives_the_field_of_view_and_the_pose_is_read(tmp_path):
+    """A checkerboard calibration gives K but no pose: such a camera file sets the estimate's
+    intrinsics (a 60° lens whose principal point is 3 px off the centre, written for a frame
+    twice the clip's size), and the pose and ground are still read from the fall."""
+    frames = _falling_disc()
+    clip = write_mp4(tmp_path / "clip.mp4", frames, fps=1 / FRAME_DT)
+    focal = HEIGHT / math.tan(math.radians(30.0))  # at 2× the clip's size: a 60° vertical view
+    K = [[focal, 0.0, WIDTH + 3.0], [0.0, focal, HEIGHT], [0.0, 0.0, 1.0]]
+    intrinsics = tmp_path / "intrinsics.json"
+    intrinsics.write_text(json.dumps({"K": K, "width": 2 * WIDTH, "height": 2 * HEIGHT}))
+    observation = load_observation(clip, camera=intrinsics)
+    estimate = observation.camera_estimate
+    assert estimate["fov_deg"] == pytest.approx(60.0, abs=1e-3)
+    assert "camera file's K" in estimate["fov_from"]
+    assert float(observation.camera.K[0, 2]) == pytest.approx(WIDTH / 2 + 1.5)
+    assert estimate["distance_m"] > 0 and estimate["camera_height_m"] > 0
+    with pytest.raises(InputError, match="principal point"):
+        intrinsics.write_text(json.dumps({"K": K}))  # K for 72 × 128 read at 36 × 64
+        load_observation(clip, camera=intrinsics)

@@ -484,12 +484,21 @@ def estimate_camera(
     fit_px: float = FALL_FIT_PX,  # the masks' pixel error: FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
     ground_from_touch: bool = True,  # False: from the rest only (the rule before the touch)
     touch: str = "soft",  # TOUCHES: how the object meets the ground (contact_time)
+    intrinsics: Tensor | None = None,  # [3, 3] pixels at the masks' size: K known (a camera
+    # file without a pose); then fov_deg is not used
 ) -> CameraEstimate:
-    """The camera (intrinsics from ``fov_deg``, pose and ground from the video; module doc)."""
+    """The camera (intrinsics from ``fov_deg`` or given, pose and ground from the video; module
+    doc)."""
     height_px, width_px = masks.shape[1:3]
-    fov, fov_from = recording_fov(fov_deg, None, width_px, height_px)
-    K = intrinsics_from_fov(fov, width_px, height_px, dtype=torch.float64)
-    f, cx, cy = float(K[0, 0]), float(K[0, 2]), float(K[1, 2])
+    if intrinsics is None:
+        fov, fov_from = recording_fov(fov_deg, None, width_px, height_px)
+        K = intrinsics_from_fov(fov, width_px, height_px, dtype=torch.float64)
+    else:
+        K = intrinsics.double()
+        fov = math.degrees(2 * math.atan(0.5 * height_px / float(K[1, 1])))
+        fov_from = "the camera file's K (intrinsics only; the pose read from the video)"
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    f = math.sqrt(fx * fy)  # for lengths in any direction (square pixels: fx = fy)
     track = mask_track(masks)
     count = _free_fall_frames(track, frame_dt, fit_px)
     params, positions, rms, depth_error = _fit_fall(track, count, frame_dt, K.numpy())
@@ -509,7 +518,7 @@ def estimate_camera(
     contact = None
     if ground_from_touch:
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
-        falling = f * path[:, 1] / path[:, 2] + cy
+        falling = fy * path[:, 1] / path[:, 2] + cy
         contact = contact_time(track, count, frame_dt, falling, metres_per_px, touch)
     if contact is not None:
         # the ground (module doc, 2): the centre at the touch plus the object's extent below
@@ -522,9 +531,9 @@ def estimate_camera(
         # nearer than its centre by about its half-depth (the mask's half-width) seen at cos θ
         landing = positions(params, np.array([count * frame_dt]))[0]
         depth = float(landing[2])
-        half_width = 0.5 * track.width[-1] * depth / f
+        half_width = 0.5 * track.width[-1] * depth / fx
         near = depth - half_width * math.cos(pitch)
-        bottom = np.array([(track.centroid[-1, 0] - cx) / f, (track.bottom[-1] - cy) / f, 1.0])
+        bottom = np.array([(track.centroid[-1, 0] - cx) / fx, (track.bottom[-1] - cy) / fy, 1.0])
         camera_height = float(near * bottom @ down)
     if not camera_height > 0:
         raise InputError(

@@ -9,9 +9,11 @@ Camera file (``--camera cam.json``; OpenCV convention, docs/design.md#convention
       "ground_height": 0.0                               optional, metres (default 0)
     }
 
-When ``width``/``height`` differ from the video's, K is scaled to the video. Without a file the
-camera is the dataset's view 0 (2 m from the point (0, 0, 0.3) m, 15° elevation, 40° vertical
-field of view) at the video's size: film from about there, or give the file.
+When ``width``/``height`` differ from the video's, K is scaled to the video. A file with K and
+no ``world_to_cam`` (a checkerboard calibration without a floor marker) gives the intrinsics
+alone: the pose and the ground are then read from the video (:func:`read_intrinsics`).
+``--camera dataset`` is the dataset's view 0 (2 m from the point (0, 0, 0.3) m, 15° elevation,
+40° vertical field of view) at the video's size.
 """
 
 from __future__ import annotations
@@ -102,12 +104,8 @@ def read_camera(path: str | os.PathLike, width: int, height: int) -> CameraSpec:
     """The camera file at ``path`` for frames of ``width × height`` pixels (see module doc)."""
     source = str(path)
     data = read_json(path, expected="a JSON object with K and world_to_cam")
-    K = _matrix(data, "K", (3, 3), source)
+    K, size = _intrinsics(data, source, width, height)
     world_to_cam = _matrix(data, "world_to_cam", (4, 4), source)
-    if not (K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1 and K[2, :2].abs().sum() == 0):
-        raise InputError(
-            "expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0", source, "K"
-        )
     rotation = world_to_cam[:3, :3]
     if not torch.allclose(rotation @ rotation.T, torch.eye(3, dtype=torch.float64), atol=1e-3):
         raise InputError("its 3×3 block is not a rotation", source=source, field="world_to_cam")
@@ -116,6 +114,33 @@ def read_camera(path: str | os.PathLike, width: int, height: int) -> CameraSpec:
     ):
         raise InputError(
             "expected a rigid transform (det +1, last row 0 0 0 1)", source, "world_to_cam"
+        )
+    ground = data.get("ground_height", 0.0)
+    if not isinstance(ground, (int, float)) or not math.isfinite(ground):
+        raise InputError(f"expected a number in metres, got {ground!r}", source, "ground_height")
+    spec = CameraSpec(K, world_to_cam, size[0], size[1], float(ground), source)
+    return spec.resized(width, height) if tuple(size) != (width, height) else spec
+
+
+def read_intrinsics(path: str | os.PathLike, width: int, height: int) -> Tensor | None:
+    """K [3, 3] at ``width × height`` pixels of a camera file that has no ``world_to_cam`` (its
+    intrinsics alone, e.g. from a checkerboard calibration: the pose and the ground are then
+    read from the video), or None for a file with a pose (:func:`read_camera` reads it)."""
+    source = str(path)
+    data = read_json(path, expected="a JSON object with K and world_to_cam")
+    if "world_to_cam" in data:
+        return None
+    K, size = _intrinsics(data, source, width, height)
+    return K * torch.tensor([width / size[0], height / size[1], 1.0], dtype=K.dtype)[:, None]
+
+
+def _intrinsics(data: dict, source: str, width: int, height: int) -> tuple[Tensor, list[int]]:
+    """A camera file's K [3, 3] and the [width, height] it was made for (the frames' when not
+    given), checked."""
+    K = _matrix(data, "K", (3, 3), source)
+    if not (K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1 and K[2, :2].abs().sum() == 0):
+        raise InputError(
+            "expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0", source, "K"
         )
     size = []
     for key, default in (("width", width), ("height", height)):
@@ -131,11 +156,7 @@ def read_camera(path: str | os.PathLike, width: int, height: int) -> CameraSpec:
             source,
             "K",
         )
-    ground = data.get("ground_height", 0.0)
-    if not isinstance(ground, (int, float)) or not math.isfinite(ground):
-        raise InputError(f"expected a number in metres, got {ground!r}", source, "ground_height")
-    spec = CameraSpec(K, world_to_cam, size[0], size[1], float(ground), source)
-    return spec.resized(width, height) if tuple(size) != (width, height) else spec
+    return K, size
 
 
 def write_camera(path: str | os.PathLike, camera: CameraSpec) -> None:

@@ -29,7 +29,7 @@ from torch import Tensor
 
 from ..errors import InputError
 from .calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX, check_camera_file, estimate_camera
-from .camera import CameraSpec, default_camera, read_camera
+from .camera import CameraSpec, default_camera, read_camera, read_intrinsics
 from .interpolate import frames_between
 from .lens import recording_fov
 from .masks import (
@@ -301,12 +301,23 @@ def load_observation(
             segment=segment,
         )  # fmt: skip
     check_release(chosen, str(path), start, frame_dt)
-    estimate = None
-    if camera is None:  # from the video: gravity's scale, the ground where it touches or rests
-        found = estimate_camera(chosen, frame_dt, read_fov, fit_px, touch=touch)
-        found.fov_from = fov_from + (" (narrowed to the steadied crop)" if margin else "")
+    estimate, intrinsics = None, None
+    dataset_camera = str(camera) == DATASET_CAMERA and not Path(camera).exists()
+    if camera is not None and not dataset_camera:  # K alone (no pose): the pose from the video
+        intrinsics = read_intrinsics(camera, *recorded_size)
+        if intrinsics is not None:
+            known = CameraSpec(intrinsics, torch.eye(4, dtype=torch.float64), *recorded_size)
+            intrinsics = (
+                known.resized(filmed_width, filmed_height).cropped(margin, margin, width, height).K
+            )
+    if camera is None or intrinsics is not None:  # from the video: gravity's scale, the ground
+        found = estimate_camera(
+            chosen, frame_dt, read_fov, fit_px, touch=touch, intrinsics=intrinsics
+        )
+        if intrinsics is None:
+            found.fov_from = fov_from + (" (narrowed to the steadied crop)" if margin else "")
         spec, estimate = found.camera, found.to_json()
-    elif str(camera) == DATASET_CAMERA and not Path(camera).exists():
+    elif dataset_camera:
         spec = default_camera(filmed_width, filmed_height).cropped(margin, margin, width, height)
     else:
         spec = read_camera(camera, *recorded_size).resized(filmed_width, filmed_height)

@@ -47,7 +47,8 @@ def predict_command(
     background: Path = typer.Option(None, help="Clean plate image for background subtraction."),
     camera: Path = typer.Option(
         None,
-        help="Camera JSON (K, world_to_cam, ground_height), or 'dataset' (the dataset's view 0); "
+        help="Camera JSON (K, world_to_cam, ground_height; K alone: the pose read from the "
+        "video), or 'dataset' (the dataset's view 0); "
         "default: estimated from the video (scale from the free fall, ground where it first "
         "touches, or else where it rests; needs ≥ 4 frames of fall).",
     ),
