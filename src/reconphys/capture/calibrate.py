@@ -496,7 +496,7 @@ def estimate_camera(
     else:
         K = intrinsics.double()
         fov = math.degrees(2 * math.atan(0.5 * height_px / float(K[1, 1])))
-        fov_from = "the camera file's K (intrinsics only; the pose read from the video)"
+        fov_from = "the camera file's K; the pose read from the video"
     fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
     f = math.sqrt(fx * fy)  # for lengths in any direction (square pixels: fx = fy)
     track = mask_track(masks)
