@@ -29,7 +29,7 @@ import reconphys
 import reconphys.capture.video as video_module
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
-from reconphys.render.video import write_image, write_mp4
+from reconphys.render.video import run_ffmpeg, write_image, write_mp4
 
 WAYS = ("constant_rate", "variable_own_times", "variable_mean_rate")
 
@@ -45,7 +45,7 @@ def write_variable_rate(frames: np.ndarray, frame_dt: float, full: int, path: Pa
         command = ["-v", "error", "-framerate", f"{1 / frame_dt:.6f}"]
         command += ["-i", str(Path(folder) / "%03d.png"), "-vf", f"select={select}"]
         command += ["-fps_mode", "passthrough", "-c:v", "libx264", "-crf", "18"]
-        run = video_module._ffmpeg([*command, "-pix_fmt", "yuv420p", str(path)])
+        run = run_ffmpeg([*command, "-pix_fmt", "yuv420p", str(path)])
     if run.returncode != 0:
         raise RuntimeError(run.stderr.strip()[:300])
 

@@ -13,7 +13,7 @@ import reconphys.capture.video as video_module
 from reconphys.capture import load_observation
 from reconphys.capture.interpolate import frames_between
 from reconphys.capture.video import resample_between, resample_indices
-from reconphys.render.video import copy_with_metadata
+from reconphys.render.video import copy_with_metadata, run_ffmpeg
 
 FRAME_DT = 0.03
 SIZE = 64
@@ -129,7 +129,7 @@ def test_a_variable_rate_video_reads_each_frame_at_its_own_time(tmp_path, monkey
     command = ["-v", "error", "-framerate", "30", "-i", str(frames / "%03d.png")]
     command += ["-vf", f"select={keep}", "-fps_mode", "passthrough", "-c:v", "libx264"]
     command += ["-qp", "0", "-pix_fmt", "yuv444p", str(path)]
-    assert video_module._ffmpeg(command).returncode == 0
+    assert run_ffmpeg(command).returncode == 0
     stamps = video_module.read_video(path)[4]
     assert stamps is not None and np.abs(stamps - t).max() < 1e-3
     observation = load_observation(path, camera="dataset")

@@ -3,6 +3,7 @@ plugins) or a folder of frames, and resampling it in time to the simulator's ``f
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import re
@@ -11,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..render.video import FOCAL_35MM_KEY
+from ..render.video import FOCAL_35MM_KEY, run_ffmpeg
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v", ".gif")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
@@ -67,25 +68,34 @@ def _read_gif(path: Path) -> tuple[list[np.ndarray], np.ndarray]:
 VARIABLE_RATE_SHARE = 0.25
 
 
-def _ffmpeg(arguments: list[str], timeout: float = 120.0):
-    import subprocess
+# What ffmpeg lists of a file without decoding it: its global tags, its video packets
+_LISTINGS = {
+    "ffmetadata": ["-f", "ffmetadata", "-"],
+    "framecrc": ["-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"],
+}
 
-    import imageio_ffmpeg
 
-    command = [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", *arguments]
-    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+@functools.lru_cache(maxsize=32)
+def _cached_listing(kind: str, path: str, version: tuple[int, int]) -> str | None:
+    run = run_ffmpeg(["-v", "error", "-i", path, *_LISTINGS[kind]], timeout=60)
+    return run.stdout if run.returncode == 0 else None
+
+
+def _listing(kind: str, path: str | os.PathLike) -> str | None:
+    """ffmpeg's ``kind`` listing of a file (:data:`_LISTINGS`), or None when it fails: read once
+    per version of the file (predict asks for the tags and the packets more than once)."""
+    stat = os.stat(path)
+    return _cached_listing(kind, str(path), (stat.st_mtime_ns, stat.st_size))
 
 
 def packet_times(path: str | os.PathLike) -> np.ndarray | None:
     """Presentation times (seconds, sorted) of a video file's first video stream's packets, read
     without decoding (ffmpeg's framecrc muxer); None when ffmpeg cannot list them."""
-    run = _ffmpeg(
-        ["-v", "error", "-i", str(path), "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"]
-    )
-    base = re.search(r"^#tb 0: (\d+)/(\d+)", run.stdout, re.MULTILINE)
-    if run.returncode != 0 or base is None:
+    text = _listing("framecrc", path)
+    base = None if text is None else re.search(r"^#tb 0: (\d+)/(\d+)", text, re.MULTILINE)
+    if base is None:
         return None
-    rows = re.findall(r"^0,\s*-?\d+,\s*(-?\d+),", run.stdout, re.MULTILINE)
+    rows = re.findall(r"^0,\s*-?\d+,\s*(-?\d+),", text, re.MULTILINE)
     return np.sort(np.array([int(r) for r in rows], dtype=np.float64)) * int(base[1]) / int(base[2])
 
 
@@ -106,7 +116,7 @@ def decoded_times(path: str | os.PathLike, until: float | None = None) -> np.nda
     arguments = ["-i", str(path), "-map", "0:v:0", "-fps_mode", "passthrough", "-vf", "showinfo"]
     if until is not None:
         arguments += ["-t", f"{until + 1.0:.6f}"]
-    run = _ffmpeg(["-v", "info", *arguments, "-f", "null", "-"])
+    run = run_ffmpeg(["-v", "info", *arguments, "-f", "null", "-"])
     found = re.findall(r"Parsed_showinfo.*?\bpts_time:\s*(-?[\d.]+)", run.stderr)
     if run.returncode != 0 or not found:
         raise InputError("cannot read the frames' times (ffmpeg showinfo)", source=str(path))
@@ -214,8 +224,7 @@ def _video_tag(path: Path, keys: tuple[str, ...]) -> float | None:
     if path.suffix.lower() not in VIDEO_SUFFIXES or path.suffix.lower() == ".gif":
         return None
     try:
-        run = _ffmpeg(["-v", "error", "-i", str(path), "-f", "ffmetadata", "-"], timeout=30)
-        values = (_ffmetadata_value(run.stdout, key) for key in keys)
+        values = (_ffmetadata_value(_listing("ffmetadata", path), key) for key in keys)
         number = float(next(v for v in values if v is not None))
     except Exception:  # metadata is a hint: absent or unreadable is None
         return None

@@ -55,21 +55,27 @@ def write_mp4(
     return path
 
 
+def run_ffmpeg(arguments: list[str], timeout: float = 120.0):
+    """imageio-ffmpeg's ffmpeg binary with ``arguments``, its output captured as text →
+    ``subprocess.CompletedProcess``."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    command = [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", *arguments]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+
+
 def copy_with_metadata(
     source: str | os.PathLike, target: str | os.PathLike, metadata: dict[str, str]
 ) -> Path:
     """Copy a video file (the streams as they are, no re-encoding) with ``metadata`` added as
     QuickTime keys (what a phone writes, e.g. :data:`FOCAL_35MM_KEY`), atomically."""
-    import subprocess
-
-    import imageio_ffmpeg
-
     target = Path(target)
     tags = [arg for key, value in metadata.items() for arg in ("-metadata", f"{key}={value}")]
     with atomic_file(target) as tmp:
-        command = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-i", str(source)]
-        command += ["-c", "copy", "-movflags", "use_metadata_tags", *tags, str(tmp)]
-        run = subprocess.run(command, capture_output=True, text=True, timeout=120)
+        command = ["-v", "error", "-y", "-i", str(source), "-c", "copy"]
+        run = run_ffmpeg([*command, "-movflags", "use_metadata_tags", *tags, str(tmp)])
         if run.returncode != 0:
             raise RuntimeError(f"ffmpeg could not copy {source}: {run.stderr.strip()[:200]}")
     return target
