@@ -618,6 +618,40 @@ def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     check_release(torch.from_numpy(falling).float(), "falling")
 
 
+def test_a_hidden_top_in_the_first_frames_is_flagged(bundle, tmp_path):
+    """The drop's masks with the object's top rows hidden in frames 0–1, a fifth of its area (a
+    hand over it: the mask grows as the object leaves it), are answered with the velocity
+    flagged, in prediction.json and printed; the drop's own masks are not flagged."""
+    from reconphys.capture.masks import FIRST_FRAMES_AREA_CHANGE, first_frames_area_change
+
+    frames = _frame_folder(bundle, tmp_path)
+    whole = load_observation(bundle / "video.mp4", camera=bundle / "camera.json").masks > 0.5
+    hidden = whole.clone()
+    for t in (0, 1):
+        while hidden[t].sum() > 0.8 * whole[t].sum():
+            hidden[t, torch.nonzero(hidden[t].any(1))[0, 0]] = False
+    assert first_frames_area_change(whole.float()) < FIRST_FRAMES_AREA_CHANGE
+    assert first_frames_area_change(hidden.float()) > FIRST_FRAMES_AREA_CHANGE
+    assert first_frames_area_change(torch.zeros(4, 8, 8)) == float("inf")
+    for name, masks_of in (("hidden", hidden), ("whole", whole)):
+        masks = tmp_path / f"masks_{name}"
+        masks.mkdir()
+        for t, mask in enumerate(masks_of.numpy()):
+            imageio.imwrite(masks / f"{t:03d}.png", mask.astype(np.uint8) * 255)
+        result, out = _predict(
+            [frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply", "--camera",
+             bundle / "camera.json", "--no-refine"],
+            tmp_path,
+            name,
+        )  # fmt: skip
+        assert result.exit_code == 0, result.output
+        velocity = json.loads((out / "prediction.json").read_text())["initial_velocity"]
+        flagged = "warning" in velocity
+        assert flagged == (name == "hidden"), velocity
+        assert ("warning: initial velocity: the object's mask changes size by up to"
+                in result.output) == flagged  # fmt: skip
+
+
 def test_first_frames_agreement():
     """Frame 0's mask against frame 2's: a moved copy agrees exactly (IoU 1, area ×1) wherever
     it is; half of it overlaps by 0.5 at ×2 the area; an empty frame 2 does not agree."""

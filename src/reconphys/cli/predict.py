@@ -190,6 +190,9 @@ def predict_command(
             f"{estimate['drop_height_m']:.2f} m above it ({drop_low:.2f}–{drop_high:.2f} m, "
             "10–90 %)"
         )
+    velocity_warning = summary.get("initial_velocity", {}).get("warning")
+    if velocity_warning:
+        typer.echo(f"warning: initial velocity: {velocity_warning}", err=True)
     if "model_choice" in summary:
         typer.echo(f"physics network: {summary['model']} ({summary['model_choice']})")
     if "gs_model_choice" in summary:

@@ -36,6 +36,7 @@ from ..assets.build import lifted_above
 from ..assets.gaussians import Gaussians
 from ..capture import Observation
 from ..capture.calibrate import check_touch
+from ..capture.masks import FIRST_FRAMES_AREA_CHANGE, first_frames_area_change
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
 from ..models.gaussian_shipped import (
@@ -430,6 +431,7 @@ def predict_observation(
             error = (error**2 + (spread * across) ** 2).sqrt()
         check_initial_speed(velocity, observation.source)
         at_rest = not bool(velocity.any())
+        area_change = first_frames_area_change(observation.masks)
         details["initial_velocity"] = {
             "linear_m_s": [round(float(x), 4) for x in velocity],
             # its standard error along the camera's x (right), y (down) and viewing axes (with
@@ -449,7 +451,16 @@ def predict_observation(
                 if at_rest or not refine
                 else ""
             ),
+            # |log(area_t / area_0)| over frames 0–3 (capture.masks.FIRST_FRAMES_AREA_CHANGE)
+            "first_frames_area_change": round(area_change, 4),
         }
+        if area_change > FIRST_FRAMES_AREA_CHANGE:
+            details["initial_velocity"]["warning"] = (
+                f"the object's mask changes size by up to {math.exp(area_change) - 1:.0%} in "
+                "frames 0–3, more than a released object's: something in view (the hand that "
+                "let it go?) hides it or is taken for it, and the velocity read from those "
+                "frames may be wrong; check preview.mp4, or give the masks with --masks DIR"
+            )
     angular = None
     if build_new and refine and not at_rest:  # the spin about the view, from the free fall
         angular, details["initial_velocity"]["angular"] = spin_estimate(
