@@ -113,7 +113,8 @@ gs-model-crop: install
 # shapes at 96 px, as many again in the vivid look (2026-11-27), every held-out and validation
 # mesh left out (configs/masks_held_out.txt), 8000 steps of train-masks. The shipped segmenter is
 # an ensemble of two such networks (2026-11-28): the first's vivid clips have high-contrast floors
-# in half of them, the second's none.
+# in half of them, the second's none; then both go on for 1,500 steps with a hand in view
+# (2026-11-28, later; about 40 min for the two).
 masks-model: install
 	$(BIN)/python -m pip install -q -e '.[meshes]'
 	$(BIN)/reconphys make-data --source pybullet --scene realistic --objects 60 \
@@ -142,8 +143,27 @@ masks-model: install
 	$(BIN)/reconphys train-masks --data data/seg_pyb --data data/seg_proc \
 	    --data data/seg_vivid_pyb_2 --data data/seg_vivid_proc_2 \
 	    --exclude configs/masks_held_out.txt --out runs/masks_2 --steps 8000 --no-progress
-	cp runs/masks_2/model.safetensors src/reconphys/weights/mask_segmenter_2.safetensors
-	cp runs/masks_2/model.json src/reconphys/weights/mask_segmenter_2.json
+	# both members then go on with hands in view (docs/usage.md "A hand in view"): 1,500 steps
+	# from their weights on the first dataset and three with a hand letting the object go
+	$(BIN)/reconphys make-data --source pybullet --scene realistic --hand-share 1 \
+	    --vivid-share 0.5 --objects 40 --samples-per-object 2 --test-objects 0 --resolution 96 \
+	    --seed 109 --workers 2 --out data/seg_hand_pyb
+	$(BIN)/reconphys make-data --source procedural --scene realistic --hand-share 1 \
+	    --vivid-share 0.5 --objects 40 --samples-per-object 2 --test-objects 0 --resolution 96 \
+	    --seed 113 --workers 2 --out data/seg_hand_proc
+	$(BIN)/reconphys make-data --source pybullet --scene realistic --hand-share 0.5 \
+	    --vivid-share 1 --contrast-share 0.5 --objects 40 --samples-per-object 2 \
+	    --test-objects 0 --resolution 96 --seed 127 --workers 2 --out data/seg_hand_vivid
+	for m in masks masks_2; do \
+	    $(BIN)/reconphys train-masks --data data/seg_pyb --data data/seg_hand_pyb \
+	        --data data/seg_hand_proc --data data/seg_hand_vivid \
+	        --exclude configs/masks_held_out.txt --init runs/$$m --lr 0.0005 --steps 1500 \
+	        --out runs/$${m}_hand --no-progress || exit 1; \
+	done
+	cp runs/masks_hand/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
+	cp runs/masks_hand/model.json src/reconphys/weights/mask_segmenter.json
+	cp runs/masks_2_hand/model.safetensors src/reconphys/weights/mask_segmenter_2.safetensors
+	cp runs/masks_2_hand/model.json src/reconphys/weights/mask_segmenter_2.json
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache .ruff_cache

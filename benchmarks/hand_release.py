@@ -3,12 +3,13 @@
 Every clip of our data shows the object alone; a real drop starts in a hand, which opens and
 withdraws (or stays where it was) after the release. For view 0 of the first N test samples of a
 dataset of realistic drops released from rest (``make-data --preset paper --scene realistic``),
-this benchmark renders a hand holding the object from above — a palm, four fingers and a thumb
-over the object's top (``--grip front``: the fingers over the side that faces the camera;
-``behind``: all of the hand behind the object), a forearm reaching up and away from the camera,
-in a skin tone drawn from light to dark, shaded by the scene's light; 3D Gaussians through the
-sample's own camera, so it has the object's perspective, and it hides the object where it is
-nearer than the object's centre — held still with the object for a random 5–20 frames, then
+this benchmark renders a hand holding the object from above (``reconphys.render.hand``, as
+``make-data --hand-share`` draws it) — a palm, four fingers and a thumb over the object's top
+(``--grip front``: the fingers over the side that faces the camera; ``behind``: all of the hand
+behind the object; ``drawn``: either), a forearm reaching up and away from the camera, in a skin
+tone drawn from light to dark, shaded by the scene's light; 3D Gaussians through the sample's
+own camera, so it has the object's perspective, and it hides the object where it is nearer than
+the object's centre — held still with the object for a random 5–20 frames, then
 withdrawn along the arm at a random 0.2–1 m/s (a quarter of the clips: kept still). No shadow
 of the hand is drawn. Each clip is written as an mp4 and read as ``predict --no-refine`` reads
 it (the mp4 alone: the segmenter's masks, the camera from the video), two ways: ``--start
@@ -27,10 +28,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import platform
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -41,105 +42,40 @@ from reconphys.assets.gaussians import Gaussians
 from reconphys.data import DropDataset
 from reconphys.data.scene import look_from_dict
 from reconphys.errors import InputError
-from reconphys.render import render
+from reconphys.models import mask_segmenter
 from reconphys.render.cameras import Cameras
-from reconphys.render.scene import shade_gaussians
+from reconphys.render.hand import (
+    arm_direction,
+    composite_hand,
+    draw_hand,
+    hand_gaussians,
+    object_grip,
+)
 from reconphys.render.video import to_uint8, write_mp4
 
 FRAME_DT = 0.03
-SKIN = ((0.95, 0.80, 0.69), (0.87, 0.67, 0.53), (0.70, 0.49, 0.36), (0.45, 0.30, 0.21))
-
-
-def _chain(start: np.ndarray, end: np.ndarray, radius: float, spacing: float) -> list:
-    """Gaussians (centre, axes' standard deviations, direction) along a limb from start to end."""
-    length = float(np.linalg.norm(end - start))
-    count = max(2, math.ceil(length / spacing) + 1)
-    direction = (end - start) / max(length, 1e-9)
-    along = max(spacing * 0.7, radius * 0.6)
-    return [(start + (end - start) * s, (radius, radius, along), direction)
-            for s in np.linspace(0, 1, count)]  # fmt: skip
-
-
-def _quat_z_to(direction: np.ndarray) -> np.ndarray:
-    """(w, x, y, z) of the rotation that takes the z axis to ``direction``."""
-    z = np.array([0.0, 0.0, 1.0])
-    axis = np.cross(z, direction)
-    sin, cos = np.linalg.norm(axis), float(direction @ z)
-    if sin < 1e-9:
-        return np.array([1.0, 0, 0, 0]) if cos > 0 else np.array([0.0, 1, 0, 0])
-    angle = math.atan2(sin, cos)
-    axis = axis / sin
-    return np.array([math.cos(angle / 2), *(math.sin(angle / 2) * axis)])
-
-
-def hand_gaussians(
-    top: np.ndarray,  # [3] the object's highest point in frame 0, world metres
-    half_width: float,  # the object's horizontal half-extent near its top, metres
-    arm_direction: np.ndarray,  # [3] unit, from the hand up the forearm
-    skin: tuple[float, float, float],
-    rng: np.random.Generator,
-    grip: str = "front",  # fingers over the object's camera side, or all behind it
-) -> Gaussians:
-    """A hand gripping the object's top from above, and its forearm: about 100 Gaussians.
-    ``grip="front"``: the fingers curl over the object's side that faces the camera (they hide
-    part of it), the thumb behind; ``"behind"``: the palm above and behind the object, fingers
-    and thumb on its far side (the object hides them)."""
-    side = np.cross(arm_direction, [0.0, 0.0, 1.0])
-    side = side / max(np.linalg.norm(side), 1e-9)
-    back = np.array([arm_direction[0], arm_direction[1], 0.0])
-    back = back / max(np.linalg.norm(back), 1e-9)
-    reach = min(max(half_width, 0.02), 0.06)
-    fingers = -1.0 if grip == "front" else 1.0  # −back: towards the camera
-    palm = top + np.array([0.0, 0.0, 0.025]) + (0.0 if grip == "front" else reach + 0.02) * back
-    parts = [(palm, (0.045, 0.04, 0.014), np.array([0.0, 0.0, 1.0]))]
-    for offset in (-1.5, -0.5, 0.5, 1.5):  # fingers curling down over the top
-        root = palm + fingers * back * 0.035 + side * offset * 0.018
-        tip = top + fingers * back * reach + side * offset * 0.018 - np.array([0.0, 0.0, 0.02])
-        parts += _chain(root, tip, 0.009, 0.012)
-    thumb_side = -fingers if grip == "front" else 1.0
-    thumb_root = palm + thumb_side * back * 0.03 + side * 0.03 * (grip != "front")
-    thumb_tip = top + thumb_side * back * reach - np.array([0.0, 0.0, 0.015])
-    parts += _chain(thumb_root, thumb_tip, 0.011, 0.012)
-    wrist = palm + arm_direction * 0.05
-    parts += _chain(wrist, wrist + arm_direction * 0.4, 0.035, 0.03)
-    means = torch.tensor(np.array([p[0] for p in parts]))
-    scales = torch.tensor(np.array([p[1] for p in parts]))
-    quats = torch.tensor(np.array([_quat_z_to(p[2]) for p in parts]))
-    tone = np.clip(np.array(skin) * rng.uniform(0.9, 1.1), 0, 1)
-    colors = torch.tensor(np.clip(tone + rng.normal(0, 0.02, (len(parts), 3)), 0, 1))
-    opacities = torch.full((len(parts),), 0.99, dtype=torch.float64)
-    return Gaussians.from_activated(means, scales, opacities, colors, quats)
 
 
 def with_hand(
     frames: np.ndarray,  # [T, H, W, 3] float in [0, 1], the drop from its release
+    masks: np.ndarray,  # [T, H, W] bool, the object's true masks
+    depths: np.ndarray,  # [T] camera-space z of the object's centre, metres
     hold: int,  # frames held still before the release
     hand: Gaussians,
     velocity: np.ndarray,  # [3] the hand's velocity after the release, m/s
     cameras: Cameras,  # one camera
     look,
-    object_masks: np.ndarray,  # [T, H, W] bool, the object's true masks
-    object_depths: np.ndarray,  # [T] camera-space z of the object's centre, metres
 ) -> np.ndarray:  # [hold + T, H, W, 3]
-    """The clip with the hand over it: still for the hold (frame 0 repeated), then moving. The
-    hand hides the object where it is nearer than the object's centre (its fingers in front)."""
-    clip = np.concatenate([frames[:1].repeat(hold, 0), frames])
-    masks = np.concatenate([object_masks[:1].repeat(hold, 0), object_masks])
-    depths = np.concatenate([object_depths[:1].repeat(hold, 0), object_depths])
-    out = []
-    for index in range(len(clip)):
-        t = max(index - hold, 0) * FRAME_DT
-        moved = Gaussians.from_activated(hand.means + torch.tensor(velocity) * t, hand.scales,
-                                         hand.opacities, hand.colors, hand.quats)  # fmt: skip
-        shaded = shade_gaussians(moved, look)
-        result = render(shaded, cameras, backend="torch")
-        rgb = result.rgb[0].numpy()
-        alpha = result.alpha[0].numpy()
-        behind = masks[index] & (result.depth[0].numpy() > depths[index])
-        alpha = np.where(behind, 0.0, alpha)[..., None]
-        rgb = np.where(behind[..., None], 0.0, rgb)
-        out.append(rgb + (1 - alpha) * clip[index])
-    return np.clip(np.stack(out), 0, 1)
+    """The clip held still for ``hold`` frames (frame 0 repeated), then the drop, with the hand
+    over it (render/hand.py: still until the release, then moving)."""
+
+    def held(x: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.concatenate([x[:1].repeat(hold, 0), x]))[None]
+
+    times = (torch.arange(hold + len(frames), dtype=torch.float64) - hold) * FRAME_DT
+    clip, _ = composite_hand(held(frames), held(masks), held(depths), hand, velocity, times,
+                             cameras, look)  # fmt: skip
+    return clip[0].numpy()
 
 
 def _iou(read: np.ndarray, true: np.ndarray) -> float:  # [T, H, W] bool each
@@ -179,10 +115,16 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--keep", type=Path, default=None, help="also write the mp4s here")
-    parser.add_argument("--grip", choices=("front", "behind"), default="front",
-                        help="the fingers over the object's camera side, or behind it")  # fmt: skip
+    parser.add_argument("--grip", choices=("front", "behind", "drawn"), default="front",
+                        help="the fingers over the object's camera side, behind it, or either "
+                        "(drawn per clip, as make-data --hand-share does)")  # fmt: skip
+    parser.add_argument("--segmenter", nargs="+", type=Path, default=None,
+                        help="read the masks with these weights (one file, or several "
+                        "averaged) instead of the shipped ensemble's")  # fmt: skip
     args = parser.parse_args()
     torch.set_num_threads(2)
+    if args.segmenter:  # predict's segmenter loads the shipped paths when it is first used
+        mask_segmenter.SHIPPED_MASKS_PATHS = tuple(args.segmenter)
     dataset = DropDataset(args.data, split="test", views=[0])
     rng = np.random.default_rng(args.seed)
     rows, started = [], time.perf_counter()
@@ -197,23 +139,18 @@ def main() -> None:
             height, width = frames.shape[1:3]
             cameras = Cameras(K[None], world_to_cam[None], width, height)
             anchors = item["anchors"][0].double().numpy()  # [N, 3] frame 0
-            top = anchors[anchors[:, 2].argmax()]
-            near_top = anchors[anchors[:, 2] > top[2] - 0.03]
-            half_width = float(np.linalg.norm(near_top[:, :2] - top[:2], axis=1).max())
-            camera_centre = -world_to_cam[:3, :3].T.numpy() @ world_to_cam[:3, 3].numpy()
-            away = top[:2] - camera_centre[:2]
-            azimuth = math.atan2(away[1], away[0]) + rng.uniform(-1.2, 1.2)
-            up = rng.uniform(0.5, 1.1)  # the forearm's elevation, radians
-            arm = np.array([math.cos(azimuth) * math.cos(up), math.sin(azimuth) * math.cos(up),
-                            math.sin(up)])  # fmt: skip
-            skin = SKIN[int(rng.integers(len(SKIN)))]
-            hand = hand_gaussians(top, half_width, arm, skin, rng, args.grip)
-            speed = 0.0 if rng.uniform() < 0.25 else rng.uniform(0.2, 1.0)
-            hold = int(rng.integers(5, 21))
+            spec = draw_hand(rng)
+            if args.grip != "drawn":
+                spec = replace(spec, grip=args.grip)
+            top, half_width = object_grip(anchors)
+            eye = -world_to_cam[:3, :3].T.numpy() @ world_to_cam[:3, 3].numpy()
+            arm = arm_direction(spec, top, eye)
+            hand = hand_gaussians(top, half_width, arm, spec)
+            hold, speed = int(rng.integers(5, 21)), spec.speed
             look = look_from_dict(meta["scene"]["look"])
             track = item["anchors"].double().mean(1).numpy()  # [T, 3] the object's centre
             depths = track @ world_to_cam[:3, :3].numpy().T[:, 2] + world_to_cam[2, 3].item()
-            clip = with_hand(frames, hold, hand, arm * speed, cameras, look, true_masks, depths)
+            clip = with_hand(frames, true_masks, depths, hold, hand, arm * speed, cameras, look)
             held = folder / f"{index:03d}_hand.mp4"
             plain = folder / f"{index:03d}_nohand.mp4"
             write_mp4(held, to_uint8(torch.from_numpy(clip)), fps=1 / FRAME_DT)

@@ -88,7 +88,12 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=None)
     parser.add_argument("--split", default="test")
     parser.add_argument("--out", default=None, help="JSON file of the per-sample rows")
-    parser.add_argument("--segmenter", default=None, help="weights (default: the shipped ones)")
+    parser.add_argument(
+        "--segmenter",
+        nargs="+",
+        default=None,
+        help="weights: one file, or several averaged (default: the shipped ensemble)",
+    )
     parser.add_argument(
         "--max-side", type=int, default=MAX_SIDE, help="segment at most this size, px"
     )

@@ -539,6 +539,12 @@ def test_plain_datasets_keep_their_fingerprint_and_scene_is_checked():
         make_settings(scene="realistic", vivid_share=1.5)
     with pytest.raises(InputError, match="--contrast-share"):
         make_settings(scene="realistic", contrast_share=-0.1)
+    assert (
+        make_settings(scene="realistic", hand_share=0.5).fingerprint()
+        != make_settings(scene="realistic").fingerprint()
+    )
+    with pytest.raises(InputError, match="--hand-share"):
+        make_settings(scene="realistic", hand_share=2)
     with pytest.raises(InputError, match="--scene"):
         make_settings(scene="studio")
     with pytest.raises(InputError, match="object_size_range"):
@@ -560,6 +566,30 @@ def test_contrast_share_changes_only_the_floor():
     for a, b in drawn:
         floor = {"ground_pattern": a.look.ground_pattern, "ground_colors": a.look.ground_colors}
         assert replace(b, look=replace(b.look, **floor)) == a
+
+
+def test_hand_share_adds_a_hand_that_only_hides_the_object(tmp_path):
+    """--hand-share draws from a stream of its own: about the share asked of the scenes get a
+    hand and nothing else of a seed's scene moves; a sample with a hand stores it in its scene,
+    keeps its physics, shows the hand in its frames, and its masks are the object's without the
+    pixels the hand hides (a subset of the same sample's masks without the hand)."""
+    from reconphys.data.scene import draw_scene
+
+    plain = replace(SMALL, scene="realistic", resolution=32, objects=1, test_objects=0)
+    held = replace(plain, hand_share=0.5)
+    drawn = [(draw_scene(plain, f"object-{i}", 0), draw_scene(held, f"object-{i}", 0))
+             for i in range(80)]  # fmt: skip
+    assert 0.3 < np.mean([b.hand is not None for _, b in drawn]) < 0.7
+    assert all(replace(b, hand=None) == a for a, b in drawn)
+    make_dataset(plain, tmp_path / "alone", workers=1, device="cpu")
+    make_dataset(replace(held, hand_share=1.0), tmp_path / "held", workers=1, device="cpu")
+    alone, with_hand = DropDataset(tmp_path / "alone"), DropDataset(tmp_path / "held")
+    assert "hand" not in alone.meta(0)["scene"]
+    assert set(with_hand.meta(0)["scene"]["hand"]) >= {"grip", "skin", "speed"}
+    assert with_hand[0]["attributes"].equal(alone[0]["attributes"])
+    assert not torch.equal(with_hand[0]["frames"], alone[0]["frames"])
+    before, after = alone.masks(0), with_hand.masks(0)  # [V, T, H, W]
+    assert torch.equal(after, after & before) and after.sum() < before.sum()
 
 
 def test_vivid_share_changes_only_the_look_and_the_asset_carries_its_print(tmp_path):

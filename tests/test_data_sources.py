@@ -163,6 +163,7 @@ def test_stretch_leaves_older_datasets_fingerprints_alone():
         "video_quality_range",
         "vivid_share",
         "contrast_share",
+        "hand_share",
     ):
         values.pop(name)
     text = json.dumps(values, sort_keys=True)

@@ -42,6 +42,7 @@ SETTINGS_OPTIONS = {
     "stretch": "stretch_range",
     "vivid_share": "vivid_share",
     "contrast_share": "contrast_share",
+    "hand_share": "hand_share",
 }
 
 
@@ -89,6 +90,12 @@ def make_data(
         None,
         help="Realistic look only: the share of scenes whose floor is high-contrast (a dark and "
         "a bright colour in checkers, tiles or blobs, as an engine's default floor; default 0).",
+    ),
+    hand_share: float = typer.Option(
+        None,
+        help="Realistic look only: the share of samples released from a hand in view (a palm, "
+        "fingers and a forearm holding the object's top, withdrawn or kept still after the "
+        "release; the masks are the object's visible pixels; default 0).",
     ),
     stretch: float = typer.Option(
         None,

@@ -14,6 +14,7 @@ import torch
 
 from ..assets.asset import Asset
 from ..render import Cameras, dataset_views, render
+from ..render.hand import arm_direction, composite_hand, hand_gaussians, object_grip
 from ..render.scene import (
     SceneLook,
     add_sensor_noise,
@@ -114,6 +115,9 @@ def render_realistic(
     frames = composite_in_scene(
         rgb.cpu().double(), alpha.cpu().double(), anchors.cpu(), background, spec.look, spacing
     )
+    masks = alpha > 0.5
+    if spec.hand is not None:
+        frames, masks = held_in_hand(frames, masks, anchors, cameras, spec, settings.frame_dt)
     frames = add_sensor_noise(frames, spec.look.noise_sigma, spec.noise_seed)
     fps = 1.0 / settings.frame_dt
     decoded, videos = [], []
@@ -121,8 +125,30 @@ def render_realistic(
         frames_v, data = compress_video(view, fps, spec.video_quality)
         decoded.append(frames_v)
         videos.append(data)
-    masks = (alpha > 0.5).cpu().numpy()
-    return cameras, np.stack(decoded), masks, videos
+    return cameras, np.stack(decoded), masks.cpu().numpy(), videos
+
+
+def held_in_hand(
+    frames: torch.Tensor,  # [V, T, H, W, 3] in [0, 1]
+    masks: torch.Tensor,  # [V, T, H, W] bool
+    anchors: torch.Tensor,  # [T, N_A, 3] metres
+    cameras: Cameras,  # V cameras
+    spec: SceneSpec,  # with a hand
+    frame_dt: float,  # s
+) -> tuple[torch.Tensor, torch.Tensor]:  # frames, the object's visible masks
+    """The sample's hand over its frames (render/hand.py): holding the object's top at frame 0
+    (the release), its forearm pointing away from view 0's camera, then moving."""
+    points = anchors.detach().cpu().double()
+    top, half_width = object_grip(points[0].numpy())
+    w2c = cameras.world_to_cam.cpu().double()  # [V, 4, 4]
+    eye = (-w2c[0, :3, :3].T @ w2c[0, :3, 3]).numpy()
+    arm = arm_direction(spec.hand, top, eye)
+    hand = hand_gaussians(top, half_width, arm, spec.hand)
+    centre = points.mean(1)  # [T, 3]
+    depth = (centre @ w2c[:, 2, :3].T + w2c[:, 2, 3]).T  # [V, T] camera-space z
+    times = torch.arange(frames.shape[1], dtype=torch.float64) * frame_dt
+    return composite_hand(frames, masks.cpu(), depth, hand, arm * spec.hand.speed, times,
+                          cameras.to("cpu"), spec.look)  # fmt: skip
 
 
 def generate_sample(

@@ -18,6 +18,7 @@ import torch
 
 from ..assets.gaussians import SH_C0
 from ..render import Cameras, intrinsics_from_fov, look_at
+from ..render.hand import HandSpec, draw_hand
 from ..render.scene import SceneLook, contrast_look, draw_look, print_pattern, vivid_look
 from .objects import CanonicalObject
 from .sampling import sample_seed
@@ -27,6 +28,7 @@ MIN_CAMERA_HEIGHT = 0.05  # metres above the ground
 SCENE_STREAM = 1  # the realistic look's random stream, beside the sample's own (0)
 VIVID_STREAM = 2  # whether and how a scene is vivid (settings.vivid_share): a stream of its own
 CONTRAST_STREAM = 3  # whether and how its floor is high-contrast (settings.contrast_share)
+HAND_STREAM = 4  # whether and how a hand lets the object go (settings.hand_share)
 
 
 @dataclass(frozen=True)
@@ -42,9 +44,11 @@ class SceneSpec:
     offset: tuple[float, float]  # where the motion sits, in units of the free margin, [-1, 1]
     video_quality: float  # H.264 quality 0–10
     noise_seed: int
+    hand: HandSpec | None = None  # a hand holding the object at frame 0 (render/hand.py)
 
-    def to_dict(self) -> dict:  # JSON-ready, without the noise seed
-        return {k: v for k, v in asdict(self).items() if k != "noise_seed"}
+    def to_dict(self) -> dict:  # JSON-ready, without the noise seed (nor a hand when none)
+        out = {k: v for k, v in asdict(self).items() if k not in ("noise_seed", "hand")}
+        return out if self.hand is None else {**out, "hand": self.hand.to_dict()}
 
 
 def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> SceneSpec:
@@ -61,6 +65,11 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         contrast = np.random.default_rng([seed, CONTRAST_STREAM])
         if contrast.random() < settings.contrast_share:
             look = contrast_look(contrast, look)
+    hand = None
+    if settings.hand_share > 0:
+        held = np.random.default_rng([seed, HAND_STREAM])
+        if held.random() < settings.hand_share:
+            hand = draw_hand(held)
     return SceneSpec(
         size=size,
         look=look,
@@ -71,6 +80,7 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         offset=(float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1))),
         video_quality=float(rng.uniform(*settings.video_quality_range)),
         noise_seed=int(rng.integers(0, 2**31 - 1)),
+        hand=hand,
     )
 
 

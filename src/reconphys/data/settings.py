@@ -31,6 +31,7 @@ SCENE_FIELDS = (
     "video_quality_range",
     "vivid_share",
     "contrast_share",
+    "hand_share",
 )
 
 
@@ -94,6 +95,10 @@ class DataSettings:
     # Share of realistic scenes whose floor is high-contrast (render/scene.py contrast_look: an
     # engine's checker floor, dark and bright), after the vivid draw, from a stream of its own
     contrast_share: float = 0.0
+    # Share of realistic samples released from a hand (render/hand.py: a palm, fingers and a
+    # forearm holding the object's top at frame 0, withdrawn or kept still after), from a stream
+    # of its own; the stored masks are the object's visible pixels
+    hand_share: float = 0.0
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -118,7 +123,7 @@ class DataSettings:
                 values.pop(name)
         if not self.stretched:  # datasets made before the stretch existed keep theirs
             values.pop("stretch_range")
-        for name in ("vivid_share", "contrast_share"):  # nor before the vivid, contrast looks
+        for name in ("vivid_share", "contrast_share", "hand_share"):  # nor before those
             if self.scene != "plain" and not getattr(self, name):
                 values.pop(name)
         text = json.dumps(values, sort_keys=True)
@@ -210,7 +215,7 @@ class DataSettings:
                 raise InputError(
                     f"[{low}, {high}] must satisfy {lowest} ≤ low ≤ high ≤ {highest}", field=name
                 )
-        for name in ("vivid_share", "contrast_share"):
+        for name in ("vivid_share", "contrast_share", "hand_share"):
             share = getattr(self, name)
             if not (isinstance(share, (int, float)) and 0 <= share <= 1):
                 flag = "--" + name.replace("_", "-")
