@@ -18,6 +18,7 @@ import torch
 from torch import Tensor
 
 from ..assets.gaussians import Gaussians
+from ..geometry import axis_angle_to_matrix, matrix_to_quaternion
 from . import render
 from .cameras import Cameras
 from .scene import SceneLook, shade_gaussians
@@ -66,14 +67,14 @@ def _limb(start: np.ndarray, end: np.ndarray, radius: float, spacing: float) -> 
             for s in np.linspace(0, 1, count)]  # fmt: skip
 
 
-def _quat_z_to(direction: np.ndarray) -> np.ndarray:
-    """(w, x, y, z) of the rotation that takes the z axis to the unit ``direction``."""
-    axis = np.cross([0.0, 0.0, 1.0], direction)
-    sin, cos = float(np.linalg.norm(axis)), float(direction[2])
-    if sin < 1e-9:
-        return np.array([1.0, 0, 0, 0]) if cos > 0 else np.array([0.0, 1, 0, 0])
-    half = math.atan2(sin, cos) / 2
-    return np.array([math.cos(half), *(math.sin(half) * axis / sin)])
+def _z_to(directions: np.ndarray) -> Tensor:  # [N, 3] unit → [N, 4] (w, x, y, z)
+    """The rotations that take the z axis to each of ``directions`` (geometry.py's)."""
+    d = torch.as_tensor(directions, dtype=torch.float64)
+    cross = torch.linalg.cross(torch.tensor([0.0, 0.0, 1.0], dtype=d.dtype).expand_as(d), d)
+    sin = cross.norm(dim=-1, keepdim=True)
+    x_axis = torch.tensor([1.0, 0.0, 0.0], dtype=d.dtype)  # for −z: a half turn about x
+    axis = torch.where(sin > 1e-9, cross / sin.clamp_min(1e-12), x_axis)
+    return matrix_to_quaternion(axis_angle_to_matrix(axis * torch.atan2(sin, d[:, 2:])))
 
 
 def arm_direction(spec: HandSpec, top: np.ndarray, eye: np.ndarray) -> np.ndarray:
@@ -120,7 +121,7 @@ def hand_gaussians(
         torch.tensor(np.array([p[1] for p in parts])),
         torch.full((len(parts),), 0.99, dtype=torch.float64),
         torch.tensor(colours),
-        torch.tensor(np.array([_quat_z_to(p[2]) for p in parts])),
+        _z_to(np.array([p[2] for p in parts])),
     )
 
 
