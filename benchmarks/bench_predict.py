@@ -12,7 +12,16 @@ Two cases, each timed end to end through :func:`reconphys.pipeline.predict.predi
   default the shipped one; skipped when there is none): the whole feed-forward pipeline, whose
   issue-8 target is decode → 3DGS → physics → asset ≤ 2 s on the 2-core CPU.
 
+``--realistic DATA`` (a ``make-data --scene realistic`` dataset) adds the path a phone video
+takes: view 0 of its first test sample as the mp4 alone (no camera file, no PLY, no masks), so
+``decode`` holds the mask segmenter (its share printed as ``masks``) and the camera read from
+the fall, and the object-centric networks make the Gaussians and read the physics; then the same
+clip resized to 1080 × 1080 (a phone's shorter side), then — once, not best of — a cold
+``reconphys predict --no-refine --preview-frames 0`` process on the mp4, what a user waits for
+(interpreter, imports and model loads included).
+
     python benchmarks/bench_predict.py data/cpu_small [--sample ID] [--device cpu|cuda]
+    python benchmarks/bench_predict.py data/cpu_small --realistic data/real_other
 
 Prints the breakdown (decode, gaussians, physics_network, asset_build) per case, the target sum,
 the farthest-point-sampling twins of the anchor sampler (plain PyTorch loop vs the compiled one,
@@ -29,15 +38,20 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 from common import machine_description
+from PIL import Image
 
+import reconphys.pipeline.samples as samples
 from reconphys.assets.ply import write_ply
 from reconphys.assets.procedural import make_procedural_gaussians
+from reconphys.capture.video import read_video
 from reconphys.errors import InputError
 from reconphys.models.gaussian_shipped import load_gaussian_predictor
 from reconphys.physics.anchors import farthest_point_sampling, farthest_point_sampling_reference
 from reconphys.pipeline.predict import predict
+from reconphys.render.video import write_mp4
 from reconphys.threads import set_cpu_threads
 
 STEPS = ("decode", "gaussians", "physics_network", "asset_build")
@@ -49,6 +63,83 @@ def best_timings(repeats: int, **kwargs) -> dict[str, float]:
     return {step: min(run[step] for run in runs) for step in STEPS}
 
 
+def first_test_sample(data: str) -> str:
+    manifest = json.loads((Path(data) / "manifest.json").read_text())
+    return next(s["id"] for s in manifest["samples"] if s["split"] == "test")
+
+
+def export_video(data: str, sample: str, out: Path) -> Path:
+    """The sample as a user brings it (``reconphys data video``): the bundle's folder."""
+    command = [sys.executable, "-m", "reconphys.cli", "data", "video", data, sample, str(out)]
+    subprocess.run(command, check=True, capture_output=True)
+    return out
+
+
+class SegmenterClock:
+    """Seconds spent in the mask segmenter (pipeline.samples.segment_frames) while installed."""
+
+    def __init__(self):
+        self.seconds = 0.0
+        self._segment = samples.segment_frames
+
+    def __enter__(self):
+        def timed(frames):
+            started = time.perf_counter()
+            try:
+                return self._segment(frames)
+            finally:
+                self.seconds += time.perf_counter() - started
+
+        samples.segment_frames = timed
+        return self
+
+    def __exit__(self, *_):
+        samples.segment_frames = self._segment
+
+
+def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
+    """The mp4 alone of a realistic recording, as recorded and at 1080 × 1080 (module doc)."""
+    sample = first_test_sample(data)
+    bundle = export_video(data, sample, tmp / "realistic")
+    video = bundle / "video.mp4"
+    frames, fps = read_video(video)[:2]
+    large = np.stack([np.asarray(Image.fromarray(f).resize((1080, 1080))) for f in frames])
+    write_mp4(tmp / "large.mp4", large[..., :3], fps=fps or 1 / 0.03)
+    print(f"# realistic: {data} sample {sample}, view 0, the mp4 alone")
+    print(
+        f"{'case':16s} {'size':>9s} {'gaussians':>9s} {'anchors':>7s} "
+        + " ".join(f"{s:>15s}" for s in STEPS)
+        + f" {'of which masks':>14s} {'all four':>9s}"
+    )
+    for name, path in (("mp4 alone", video), ("mp4 1080×1080", tmp / "large.mp4")):
+        kwargs = dict(input=str(path), device=device, refine=False)
+        result = predict(**kwargs)  # warm-up: model loads, Numba, allocator
+        runs = []
+        for _ in range(repeats):
+            with SegmenterClock() as clock:
+                timings = predict(**kwargs).timings
+            runs.append({**timings, "masks": clock.seconds})
+        best = {step: min(run[step] for run in runs) for step in (*STEPS, "masks")}
+        size = "×".join(str(n) for n in result.observation.recorded_size or result.observation.size)
+        print(
+            f"{name:16s} {size:>9s} {result.asset.gaussians.num_gaussians:9d} "
+            f"{result.asset.num_anchors:7d} "
+            + " ".join(f"{best[s]:15.4f}" for s in STEPS)
+            + f" {best['masks']:14.4f} {sum(best[s] for s in STEPS):9.4f}"
+        )
+    out = tmp / "cold"
+    command = [sys.executable, "-m", "reconphys.cli", "predict", str(video), "--no-refine"]
+    command += ["--preview-frames", "0", "--out", str(out), "--device", device]
+    started = time.perf_counter()
+    subprocess.run(command, check=True, capture_output=True)
+    wall = time.perf_counter() - started
+    steps = json.loads((out / "prediction.json").read_text())["timings_s"]
+    print(
+        f"cold `reconphys predict --no-refine --preview-frames 0` on the mp4: {wall:.2f} s wall "
+        f"(its steps: {', '.join(f'{k} {v:.3f}' for k, v in steps.items())})"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("data", help="dataset folder (make-data)")
@@ -57,28 +148,14 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--gs-model", default=None, help="3DGS predictor for the predicted case")
+    parser.add_argument("--realistic", default=None, help="a realistic-look dataset (module doc)")
     args = parser.parse_args()
     set_cpu_threads(args.threads)
-    manifest = json.loads((Path(args.data) / "manifest.json").read_text())
-    sample = args.sample or next(s["id"] for s in manifest["samples"] if s["split"] == "test")
+    sample = args.sample or first_test_sample(args.data)
     print(f"# {' '.join(sys.argv)}")
     print(f"# {machine_description(args.device)}")
     with tempfile.TemporaryDirectory() as tmp:
-        bundle = Path(tmp) / "bundle"
-        subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "reconphys.cli",
-                "data",
-                "video",
-                args.data,
-                sample,
-                str(bundle),
-            ],
-            check=True,
-            capture_output=True,
-        )
+        bundle = export_video(args.data, sample, Path(tmp) / "bundle")
         big = make_procedural_gaussians("bunny", 20000, seed=0)
         reference = predict(
             str(bundle / "video.mp4"),
@@ -121,6 +198,8 @@ def main() -> None:
                 + " ".join(f"{timings[s]:15.4f}" for s in STEPS)
                 + f" {target:14.4f} {sum(timings.values()):9.4f}"
             )
+        if args.realistic:
+            realistic_rows(args.realistic, Path(tmp), args.repeats, args.device)
     points = torch.rand(16384, 3, generator=torch.Generator().manual_seed(0)).double()
     farthest_point_sampling(points, 8)  # compile / load from the cache
     seconds = {}

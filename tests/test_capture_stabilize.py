@@ -15,6 +15,7 @@ import torch.nn.functional as F
 from reconphys.capture import load_observation, stabilize
 from reconphys.capture.stabilize import (
     MAX_SHAKE_SHARE,
+    READ_MAX_SIDE,
     STILL_PX,
     crop_margin,
     read_shake,
@@ -33,14 +34,15 @@ def _walk(step: float, seed: int = 0) -> torch.Tensor:
     return steps.cumsum(0).clamp(-PAD + 1, PAD - 1)
 
 
-def _scene(shifts: torch.Tensor, textured: bool = True):
+def _scene(shifts: torch.Tensor, textured: bool = True, zoom: int = 1):
     """Frames [T, SIZE, SIZE, 3] of a disc falling (then resting) before a background, the
     camera moved so that the picture shifts by ``shifts`` [T, 2] px; the disc's true masks in
-    the same frames, and the background alone as frame 0 sees it (a clean plate)."""
-    side = SIZE + 2 * PAD
+    the same frames, and the background alone as frame 0 sees it (a clean plate). ``zoom``: the
+    same scene filmed with ``zoom`` times the pixels a side (``shifts`` in those pixels)."""
+    side = (SIZE + 2 * PAD) * zoom
     generator = torch.Generator().manual_seed(1)
     if textured:  # smooth blotches, 4-px grain: a floor and a wall of a real room
-        noise = torch.rand(1, 3, side // 4, side // 4, generator=generator)
+        noise = torch.rand(1, 3, side // (4 * zoom), side // (4 * zoom), generator=generator)
         background = F.interpolate(noise, size=(side, side), mode="bicubic", align_corners=False)
         background = (0.2 + 0.6 * background[0].permute(1, 2, 0)).clamp(0, 1)
     else:
@@ -48,15 +50,16 @@ def _scene(shifts: torch.Tensor, textured: bool = True):
     rows, cols = torch.meshgrid(torch.arange(side) + 0.5, torch.arange(side) + 0.5, indexing="ij")
     frames, masks = [], []
     for t in range(FRAMES):
-        centre_row = min(PAD + 16 + 900 * (t * 0.03) ** 2, PAD + 70)
-        disc = ((rows - centre_row) ** 2 + (cols - side / 2) ** 2 <= 64).float()
+        centre_row = zoom * min(PAD + 16 + 900 * (t * 0.03) ** 2, PAD + 70)
+        disc = ((rows - centre_row) ** 2 + (cols - side / 2) ** 2 <= 64 * zoom**2).float()
         frames.append(
             background * (1 - disc[..., None]) + disc[..., None] * torch.tensor([0.9, 0.15, 0.1])
         )
         masks.append(disc)
-    frames = warp(torch.stack(frames), shifts)[:, PAD:-PAD, PAD:-PAD]
-    masks = warp(torch.stack(masks)[..., None], shifts)[:, PAD:-PAD, PAD:-PAD, 0]
-    return frames, masks, background[PAD:-PAD, PAD:-PAD]
+    pad = PAD * zoom
+    frames = warp(torch.stack(frames), shifts)[:, pad:-pad, pad:-pad]
+    masks = warp(torch.stack(masks)[..., None], shifts)[:, pad:-pad, pad:-pad, 0]
+    return frames, masks, background[pad:-pad, pad:-pad]
 
 
 def test_warp_moves_the_content_by_the_shift():
@@ -81,6 +84,26 @@ def test_the_shake_is_read_to_a_fifth_of_a_pixel_and_the_falling_object_is_not_i
     calm = read_shake(still)
     assert calm.shifts is not None and calm.largest_px < 0.1 < STILL_PX
     assert crop_margin(calm) == 0 and steady(still, calm) is still
+
+
+def test_a_large_clip_is_read_at_the_size_the_thresholds_are_for():
+    """A phone's frame read at 384 px (4× the pixels a side): its texture per pixel is a
+    sixteenth, below the threshold in every tile at full size; read area-averaged to
+    READ_MAX_SIDE, the shake is found to a fifth of a (small) pixel, and a still camera's stays
+    under STILL_PX."""
+    zoom = 4
+    shifts = _walk(0.6, seed=7) * zoom
+    frames, _, _ = _scene(shifts, zoom=zoom)
+    assert frames.shape[1] == SIZE * zoom > READ_MAX_SIDE
+    shake = read_shake(frames)
+    assert shake.shifts is not None and shake.tiles_read >= 12
+    assert float((shake.shifts - shifts).norm(dim=1).max()) < 0.2 * zoom
+    with pytest.MonkeyPatch.context() as patch:  # the whole frame read as it is: nothing found
+        patch.setattr(stabilize, "READ_MAX_SIDE", 10**6)
+        assert read_shake(frames).shifts is None
+    still, _, _ = _scene(torch.zeros(FRAMES, 2), zoom=zoom)
+    calm = read_shake(still)
+    assert calm.shifts is not None and calm.largest_px < STILL_PX and crop_margin(calm) == 0
 
 
 def test_a_plain_background_does_not_say_how_the_camera_moved():

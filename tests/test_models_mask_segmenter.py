@@ -154,6 +154,28 @@ def test_a_recording_without_masks_or_plate_goes_through_the_segmenter(realistic
     assert plain.mask_source == "background subtraction (border colour)"
 
 
+def test_the_channels_last_fast_path_matches_its_reference(realistic_views):
+    """The default hands the network pixel-major inputs (the CPU's fast layout); the reference
+    twin the usual channel-major ones: the same logits to rounding, the same masks."""
+    model = load_mask_segmenter()
+    layouts = []
+    hook = model.register_forward_pre_hook(
+        lambda _, args: layouts.append(args[0].is_contiguous(memory_format=torch.channels_last))
+    )
+    frames = realistic_views[0][0]
+    for clip, side in ((frames, 128), (frames.repeat_interleave(3, 1).repeat_interleave(3, 2), 96)):
+        layouts.clear()
+        fast = clip_logits(model, clip, max_side=side)
+        assert layouts and all(layouts)  # the fast path was taken
+        layouts.clear()
+        reference = clip_logits(model, clip, max_side=side, channels_last=False)
+        assert layouts and not any(layouts)
+        assert fast.shape == reference.shape == clip.shape[:3] and fast.is_contiguous()
+        assert (fast - reference).abs().max() < 2e-3, (fast - reference).abs().max()
+        assert ((fast > 0) != (reference > 0)).float().mean() < 1e-3
+    hook.remove()
+
+
 def test_the_shipped_segmenter_averages_its_members_logits(realistic_views):
     """The default is the ensemble of the shipped members: its logits are their mean, it differs
     from each, and its fingerprint (what stored segmenter masks are checked against) covers all."""

@@ -18,6 +18,11 @@ frame's shift against frame 0 is read from the background and taken out:
   two); with fewer than :data:`MIN_TILES`, or all within two rows or two columns of tiles
   (:data:`MIN_SPREAD`: an object on a plain background), the shake is not readable and the
   clip is left as it is;
+- a clip larger than :data:`READ_MAX_SIDE` is read area-averaged down to it, the shifts scaled
+  back: the tiles' texture per pixel (:data:`TEXTURE_MIN`) depends on the pixel's size, and a
+  phone's frame at the working 640 px showed no tile textured enough on floors whose 128-px
+  view was read to a tenth of a pixel there — besides taking 7 s where 0.1 s does
+  (docs/usage.md "A hand-held camera");
 - a clip whose shift stays under :data:`STILL_PX` is left as it is (a static camera: nothing
   changes); one that moves more than :data:`MAX_SHAKE_SHARE` of the frame is refused (a pan
   that follows the object is not a shake); otherwise every frame is moved back onto frame 0
@@ -48,6 +53,10 @@ RESIDUAL_SCALE = 0.03  # grey levels (0–1): the Cauchy weight's scale (compres
 STILL_PX = 0.5  # a shake below this (the masks' own rim noise) is left in
 MAX_SHAKE_SHARE = 0.15  # of the shorter side: more is a moving camera, refused
 MIN_SIDE = 32  # px: a smaller clip is not read (its tiles would be a few pixels)
+# px: a larger clip's shake is read area-averaged down to this longer side (module doc) — the
+# size the thresholds were chosen at (96–128-px clips) and the mask segmenter reads
+# (models/mask_segmenter.MAX_SIDE), so a tenth of its pixel is a tenth of the masks'
+READ_MAX_SIDE = 128
 _ITERATIONS = 8  # Gauss–Newton steps per scale
 _MAX_STEP_PX = 2.0  # per step, at the scale's pixels
 
@@ -179,6 +188,16 @@ def read_shake(frames: Tensor, grid: int = TILE_GRID) -> Shake:
         raise ValueError(f"frames: expected [T, H, W, 3], got {list(frames.shape)}")
     if frames.shape[0] < 2 or min(frames.shape[1:3]) < MIN_SIDE:
         return Shake(None, 0)  # nothing to compare, or too few pixels a tile
+    height, width = frames.shape[1:3]
+    if max(height, width) > READ_MAX_SIDE:  # read at the size the thresholds are for
+        factor = READ_MAX_SIDE / max(height, width)
+        size = (max(MIN_SIDE, round(height * factor)), max(MIN_SIDE, round(width * factor)))
+        small = F.interpolate(frames.permute(0, 3, 1, 2).float(), size, mode="area")
+        read = read_shake(small.permute(0, 2, 3, 1), grid)
+        if read.shifts is None:
+            return read
+        per_read_px = torch.tensor([width / size[1], height / size[0]])  # (x, y)
+        return Shake(read.shifts * per_read_px, read.tiles_read)
     grey = frames.float().mean(-1)  # [T, H, W]
     count = grid * grid
     zero = torch.zeros(frames.shape[0] - 1, count, 2)

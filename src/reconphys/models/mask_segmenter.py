@@ -133,12 +133,19 @@ def frame_inputs(
 
 
 @torch.no_grad()
-def clip_logits(model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
+def clip_logits(
+    model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE, channels_last: bool = True
+) -> Tensor:
     """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera).
 
     The network saw 96-px clips: its receptive field spans an object there, not in a phone's
     1080p frame. A clip whose longer side exceeds ``max_side`` is segmented area-averaged down
     to it and the logits are resampled (bilinear) to the clip's size (docs/usage.md).
+
+    ``channels_last`` (the fast path) hands the network its inputs pixel-major ([B, H, W, C] in
+    memory), the layout the CPU's convolutions run fastest in: the same arithmetic summed in
+    another order (logits within ~1e-4 of the reference layout, ``channels_last=False``; a test
+    compares them), 1.4–1.7× faster on a 2-core CPU.
     """
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
         raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
@@ -148,15 +155,17 @@ def clip_logits(model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE) -> T
         factor = max_side / max(height, width)
         size = (max(1, round(height * factor)), max(1, round(width * factor)))
         small = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
-        logits = clip_logits(model, small.permute(0, 2, 3, 1), max_side)
+        logits = clip_logits(model, small.permute(0, 2, 3, 1), max_side, channels_last)
         return F.interpolate(logits[:, None], size=(height, width), mode="bilinear")[:, 0]
     references = clip_references(frames)
     times = torch.linspace(0, 1, frames.shape[0])
+    layout = torch.channels_last if channels_last else torch.contiguous_format
     logits = []
     for start in range(0, frames.shape[0], FRAMES_PER_CALL):
         part = slice(start, start + FRAMES_PER_CALL)
-        logits.append(model(frame_inputs(frames[part], references, times[part])))
-    return torch.cat(logits)
+        inputs = frame_inputs(frames[part], references, times[part])
+        logits.append(model(inputs.contiguous(memory_format=layout)))
+    return torch.cat(logits).contiguous()
 
 
 def segment_clip(model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
