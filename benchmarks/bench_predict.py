@@ -15,10 +15,11 @@ Two cases, each timed end to end through :func:`reconphys.pipeline.predict.predi
 ``--realistic DATA`` (a ``make-data --scene realistic`` dataset) adds the path a phone video
 takes: view 0 of its first test sample as the mp4 alone (no camera file, no PLY, no masks), so
 ``decode`` holds the mask segmenter (its share printed as ``masks``) and the camera read from
-the fall, and the object-centric networks make the Gaussians and read the physics; then the same
-clip resized to 1080 × 1080 (a phone's shorter side), then — once, not best of — a cold
-``reconphys predict --no-refine --preview-frames 0`` process on the mp4, what a user waits for
-(interpreter, imports and model loads included).
+the fall, and the object-centric networks make the Gaussians and read the physics; where the CPU
+runs bfloat16 natively, the same with the segmenter in float32 (the fast path's twin, the ratio
+printed); then the same clip resized to 1080 × 1080 (a phone's shorter side), then — once, not
+best of — a cold ``reconphys predict --no-refine --preview-frames 0`` process on the mp4, what a
+user waits for (interpreter, imports and model loads included).
 
     python benchmarks/bench_predict.py data/cpu_small [--sample ID] [--device cpu|cuda]
     python benchmarks/bench_predict.py data/cpu_small --realistic data/real_other
@@ -49,6 +50,7 @@ from reconphys.assets.procedural import make_procedural_gaussians
 from reconphys.capture.video import read_video
 from reconphys.errors import InputError
 from reconphys.models.gaussian_shipped import load_gaussian_predictor
+from reconphys.models.mask_segmenter import native_bfloat16, segment_clip
 from reconphys.physics.anchors import farthest_point_sampling, farthest_point_sampling_reference
 from reconphys.pipeline.predict import predict
 from reconphys.render.video import write_mp4
@@ -76,17 +78,21 @@ def export_video(data: str, sample: str, out: Path) -> Path:
 
 
 class SegmenterClock:
-    """Seconds spent in the mask segmenter (pipeline.samples.segment_frames) while installed."""
+    """Seconds spent in the mask segmenter (pipeline.samples.segment_frames) while installed;
+    ``bfloat16=False`` runs it in float32 (the reference twin of the bfloat16 fast path)."""
 
-    def __init__(self):
+    def __init__(self, bfloat16: bool | None = None):
         self.seconds = 0.0
         self._segment = samples.segment_frames
+        self.bfloat16 = bfloat16
 
     def __enter__(self):
         def timed(frames):
             started = time.perf_counter()
             try:
-                return self._segment(frames)
+                if self.bfloat16 is None:
+                    return self._segment(frames)
+                return segment_clip(samples._segmenter(), frames, bfloat16=self.bfloat16)
             finally:
                 self.seconds += time.perf_counter() - started
 
@@ -111,12 +117,17 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
         + " ".join(f"{s:>15s}" for s in STEPS)
         + f" {'of which masks':>14s} {'all four':>9s}"
     )
-    for name, path in (("mp4 alone", video), ("mp4 1080×1080", tmp / "large.mp4")):
+    cases = [("mp4 alone", video, None), ("mp4 1080×1080", tmp / "large.mp4", None)]
+    if native_bfloat16():  # the segmenter's bfloat16 fast path is taken: time its twin too
+        cases.insert(1, ("mp4, float32 seg", video, False))
+    masks_seconds = {}
+    for name, path, bfloat16 in cases:
         kwargs = dict(input=str(path), device=device, refine=False)
-        result = predict(**kwargs)  # warm-up: model loads, Numba, allocator
+        with SegmenterClock(bfloat16):
+            result = predict(**kwargs)  # warm-up: model loads, Numba, allocator
         runs = []
         for _ in range(repeats):
-            with SegmenterClock() as clock:
+            with SegmenterClock(bfloat16) as clock:
                 timings = predict(**kwargs).timings
             runs.append({**timings, "masks": clock.seconds})
         best = {step: min(run[step] for run in runs) for step in (*STEPS, "masks")}
@@ -127,6 +138,12 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
             + " ".join(f"{best[s]:15.4f}" for s in STEPS)
             + f" {best['masks']:14.4f} {sum(best[s] for s in STEPS):9.4f}"
         )
+        masks_seconds[name] = best["masks"]
+    if len(masks_seconds) == 3:
+        ratio = masks_seconds["mp4, float32 seg"] / masks_seconds["mp4 alone"]
+        print(f"segmenter float32 / bfloat16 (this CPU runs bfloat16 natively): {ratio:.2f}×")
+    else:
+        print("segmenter in float32: this CPU does not run bfloat16 natively")
     out = tmp / "cold"
     command = [sys.executable, "-m", "reconphys.cli", "predict", str(video), "--no-refine"]
     command += ["--preview-frames", "0", "--out", str(out), "--device", device]

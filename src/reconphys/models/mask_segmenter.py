@@ -44,6 +44,17 @@ MAX_SIDE = 128  # px: a larger clip is segmented area-averaged down to this, the
 MAIN_BLOB_SHARE = 0.2  # regions smaller than this share of the largest are dropped
 
 
+def native_bfloat16() -> bool:
+    """Whether this CPU runs bfloat16 convolutions natively (oneDNN with AVX-512 BF16 or AMX):
+    where it does not, bfloat16 is emulated and slower than float32."""
+    try:
+        return bool(
+            torch.backends.mkldnn.is_available() and torch.ops.mkldnn._is_mkldnn_bf16_supported()
+        )
+    except (AttributeError, RuntimeError):  # a build without oneDNN or without the query
+        return False
+
+
 @dataclass(frozen=True)
 class SegmenterConfig:
     channels: tuple[int, ...] = (24, 32, 48, 64)  # per level; the deepest is dilated (context)
@@ -106,7 +117,7 @@ class SegmenterEnsemble(nn.Module):
         self.members = nn.ModuleList(members)
 
     def forward(self, x: Tensor) -> Tensor:
-        return torch.stack([member(x) for member in self.members]).mean(0)
+        return torch.stack([member(x).float() for member in self.members]).mean(0)
 
 
 Segmenter = MaskSegmenter | SegmenterEnsemble
@@ -134,7 +145,11 @@ def frame_inputs(
 
 @torch.no_grad()
 def clip_logits(
-    model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE, channels_last: bool = True
+    model: Segmenter,
+    frames: Tensor,
+    max_side: int = MAX_SIDE,
+    channels_last: bool = True,
+    bfloat16: bool | None = None,
 ) -> Tensor:
     """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera).
 
@@ -146,6 +161,12 @@ def clip_logits(
     memory), the layout the CPU's convolutions run fastest in: the same arithmetic summed in
     another order (logits within ~1e-4 of the reference layout, ``channels_last=False``; a test
     compares them), 1.4–1.7× faster on a 2-core CPU.
+
+    ``bfloat16`` (the second fast path; None: on a CPU that runs it natively, native_bfloat16)
+    runs the networks under bfloat16 autocast, the logits returned in float32: the networks 1.8×
+    faster again where the CPU has AVX-512 BF16, the logits within ~0.2 of float32's and about
+    2 pixels in 10⁵ on the other side of 0 on realistic clips (a test compares them with
+    ``bfloat16=False``, the reference twin; docs/usage.md#the-segmenter-in-bfloat16-2026-11-29).
     """
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
         raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
@@ -155,23 +176,30 @@ def clip_logits(
         factor = max_side / max(height, width)
         size = (max(1, round(height * factor)), max(1, round(width * factor)))
         small = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
-        logits = clip_logits(model, small.permute(0, 2, 3, 1), max_side, channels_last)
+        logits = clip_logits(model, small.permute(0, 2, 3, 1), max_side, channels_last, bfloat16)
         return F.interpolate(logits[:, None], size=(height, width), mode="bilinear")[:, 0]
     references = clip_references(frames)
     times = torch.linspace(0, 1, frames.shape[0])
     layout = torch.channels_last if channels_last else torch.contiguous_format
+    if bfloat16 is None:  # the CPU's fast path; on a GPU the networks stay in float32
+        bfloat16 = frames.device.type == "cpu" and native_bfloat16()
     logits = []
     for start in range(0, frames.shape[0], FRAMES_PER_CALL):
         part = slice(start, start + FRAMES_PER_CALL)
         inputs = frame_inputs(frames[part], references, times[part])
-        logits.append(model(inputs.contiguous(memory_format=layout)))
+        with torch.autocast(frames.device.type, dtype=torch.bfloat16, enabled=bfloat16):
+            logits.append(model(inputs.contiguous(memory_format=layout)).float())
     return torch.cat(logits).contiguous()
 
 
-def segment_clip(model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
+def segment_clip(
+    model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE, bfloat16: bool | None = None
+) -> Tensor:
     """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera): logits
-    above 0 (of the clip at most ``max_side`` px, see clip_logits), the main blob kept."""
-    return keep_main_blob(clip_logits(model, frames, max_side) > 0).float()
+    above 0 (of the clip at most ``max_side`` px; ``bfloat16``: see clip_logits), the main blob
+    kept."""
+    logits = clip_logits(model, frames, max_side, bfloat16=bfloat16)
+    return keep_main_blob(logits > 0).float()
 
 
 def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:
