@@ -204,6 +204,45 @@ def test_a_fall_too_short_to_show_the_scale_is_refused():
         estimate_camera(still, 0.03)
 
 
+def test_the_segmenters_masks_need_a_fall_of_five_frames():
+    """A 4-frame fall (8 cm) is read from exact masks (the true distance, 2.03 m, to 2 %); with
+    the mask segmenter's tolerance the same fall is refused, naming the frames it needs: its
+    errors come in runs of frames that one check per axis cannot see."""
+    from reconphys.capture.calibrate import SEGMENTER_FALL_FIT_PX, min_fall_frames
+
+    masks, w2c, centres = ball_masks(15.0, 2.0, 0.08, 0.1)
+    exact = estimate_camera(masks, 0.03, fov_deg=45.0)
+    true_distance = float(np.linalg.norm(w2c[:3, :3] @ centres[0] + w2c[:3, 3]))
+    assert exact.fall_frames == 4 and abs(exact.distance / true_distance - 1) < 0.02
+    assert min_fall_frames(SEGMENTER_FALL_FIT_PX) == 5
+    with pytest.raises(InputError, match=r"in 4 frame\(s\) \(fewer than 5 with the mask segm"):
+        estimate_camera(masks, 0.03, fov_deg=45.0, fit_px=SEGMENTER_FALL_FIT_PX)
+
+
+def test_a_fall_read_past_a_soft_landing_is_cut_at_the_touch():
+    """A ball that lands softly (braking at 1.5 g after its touch, 8.24 frames in): at the
+    segmenter's one-pixel tolerance a parabola runs 2 frames past the touch and reads the fall
+    slower, the ball 6 % too far; the touch read inside that window ends the fall there, and
+    the fit on the frames before it reads the distance to 2 %."""
+    from reconphys.capture.calibrate import (
+        SEGMENTER_FALL_FIT_PX,
+        _fit_fall,
+        fall_frames,
+        mask_track,
+    )
+
+    masks, w2c, centres = ball_masks(15.0, 2.0, 0.3, 0.1, braking_g=1.5)
+    distance = float(np.linalg.norm(w2c[:3, :3] @ centres[0] + w2c[:3, 3]))
+    track = mask_track(masks)
+    assert fall_frames(track, 0.03, SEGMENTER_FALL_FIT_PX) == 11
+    K = intrinsics_from_fov(45.0, 96, 96, dtype=torch.float64).numpy()
+    uncut = float(np.linalg.norm(_fit_fall(track, 11, 0.03, K)[0][:3]))
+    assert uncut / distance - 1 > 0.05
+    estimate = estimate_camera(masks, 0.03, fov_deg=45.0, fit_px=SEGMENTER_FALL_FIT_PX)
+    assert estimate.fall_frames == 9 and abs(estimate.contact_s / 0.03 - 8.24) < 0.3
+    assert abs(estimate.distance / distance - 1) < 0.02
+
+
 def test_a_size_read_to_worse_than_a_factor_of_three_is_refused():
     """A short fall (0.1 m, 5 frames), its masks a pixel's rim off at random as a segmenter's
     can be: the size's 10–90 % interval spans ×0.03–×29 (a guess, not a reading), so it is

@@ -17,10 +17,12 @@ freely for a few frames before it lands.
 2. **Ground from the first touch.** The centroid leaves the free fall's path when the object
    touches the ground, as ``−c·(t − t_c)²`` while the ground's push builds (``touch="soft"``,
    the default), or also ``−a·(t − t_c)`` when a rigid object stops or bounces at once
-   (``touch="rigid"``); :func:`contact_time` fits t_c between frames. The centre's position
-   at t_c (the fall's fit, metres) plus the object's extent below its centre (frame 0's
-   silhouette, from the centroid down to its bottom edge) puts the ground: the lowest point is
-   on it at the touch. Without a clear touch (a clip
+   (``touch="rigid"``); :func:`contact_time` fits t_c between frames. A touch read before the
+   fall's last frame ends the fall there, and step 1 is fitted again on the frames before it
+   (:func:`_fit_to_touch`: a parabola within a pixel can run past a soft landing). The
+   centre's position at t_c (the fall's fit, metres) plus the object's extent below its centre
+   (frame 0's silhouette, from the centroid down to its bottom edge) puts the ground: the
+   lowest point is on it at the touch. Without a clear touch (a clip
    that ends first, a fall cut short by mask errors), or with ``ground_from_touch=False``, the
    ground is read from where the object rests: in the last frame its lowest silhouette point
    is on (a box's near bottom edge) or just above (a ball's) the ground, nearer than its centre
@@ -28,9 +30,10 @@ freely for a few frames before it lands.
 3. **The world frame** follows the dataset's conventions (z up, ground z = 0): the camera on the
    +x side looking towards −x, pitched down by θ, and the object's frame-0 centre above the origin.
 
-Errors: ``InputError`` when the fall shows in fewer than :data:`MIN_FALL_FRAMES` frames (a drop
-from near the ground, or a clip that starts after the release): then the video does not show the
-scale, and the user must give ``--camera``.
+Errors: ``InputError`` when the fall shows in fewer than :data:`MIN_FALL_FRAMES` frames
+(:data:`SEGMENTER_MIN_FALL_FRAMES` with the mask segmenter's masks; a drop from near the ground,
+or a clip that starts after the release): then the video does not show the scale, and the user
+must give ``--camera``.
 """
 
 from __future__ import annotations
@@ -54,6 +57,12 @@ PITCH_PRIOR_DEG = 15.0  # filmed from a little above the drop
 # scale error 5.6 / 5.0 / 5.4 % with a spread of 15 / 30 / 90°.
 PITCH_PRIOR_SPREAD_DEG = 30.0
 MIN_FALL_FRAMES = 4  # frames of free fall (three intervals: an acceleration and its check)
+# With the mask segmenter's masks (fit_px above FALL_FIT_PX) one frame more: its errors come in
+# runs of frames (the first frames, where its reference is the object itself, are its weakest),
+# and one check per image axis cannot see a run of two. On 72 validation drops at 128 px two
+# showed a 4-frame fall (10 and 6 in the true masks): one read 29 % small inside a ×0.84–×1.19
+# interval, one 2.5 % small (docs/usage.md#the-fall-ends-at-the-touch-2026-11-29)
+SEGMENTER_MIN_FALL_FRAMES = 5
 LANDED_PIXELS = 1.0  # the bottom within this of its lowest: the object has landed
 # A parabola fits a free fall's track to this many pixels (plus 2 % of the radius): exact masks
 # (a file's, a clean backdrop's) to half a pixel, the mask segmenter's to a pixel, the rim its
@@ -347,11 +356,18 @@ def _fit_fall(
     return params, positions, rms, depth_error
 
 
+def min_fall_frames(fit_px: float) -> int:
+    """Frames of free fall the scale needs: MIN_FALL_FRAMES with exact masks (``fit_px`` ≤
+    FALL_FIT_PX), SEGMENTER_MIN_FALL_FRAMES with the mask segmenter's."""
+    return MIN_FALL_FRAMES if fit_px <= FALL_FIT_PX else SEGMENTER_MIN_FALL_FRAMES
+
+
 def _free_fall_frames(track: _Track, frame_dt: float, fit_px: float) -> int:
-    count = fall_frames(track, frame_dt, fit_px)
-    if count < MIN_FALL_FRAMES:
+    count, needed = fall_frames(track, frame_dt, fit_px), min_fall_frames(fit_px)
+    if count < needed:
+        masks = " with the mask segmenter's masks" if needed > MIN_FALL_FRAMES else ""
         raise InputError(
-            f"the object falls freely in {count} frame(s) (fewer than {MIN_FALL_FRAMES}): the "
+            f"the object falls freely in {count} frame(s) (fewer than {needed}{masks}): the "
             f"video does not show the scale; {GIVE_CAMERA}",
             source="camera from the video",
         )
@@ -477,6 +493,38 @@ def object_depth(
     return float(params[2])
 
 
+def _fit_to_touch(
+    track: _Track,
+    count: int,  # frames of free fall (fall_frames)
+    frame_dt: float,
+    K: np.ndarray,  # [3, 3]
+    fit_px: float,
+    touch: str,
+):
+    """The fall's fit (_fit_fall) on a window that ends at the first touch: where contact_time
+    reads the touch before the window's last frame, the frames after it are the ground's push,
+    not free fall (a parabola within a pixel runs a frame or two past a soft landing, and reads
+    the fall slower: the object larger), so the fit is done again on the frames up to the
+    touch — at most twice, never on fewer than min_fall_frames. Returns ``(count, fit,
+    contact)``: the frames kept, _fit_fall's tuple and the touch (seconds, or None) read
+    with that fit."""
+    fy, cy = float(K[1, 1]), float(K[1, 2])
+    f = math.sqrt(float(K[0, 0]) * fy)
+    for _ in range(3):
+        fit = _fit_fall(track, count, frame_dt, K)
+        params, positions = fit[0], fit[1]
+        path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
+        falling = fy * path[:, 1] / path[:, 2] + cy
+        contact = contact_time(track, count, frame_dt, falling, float(params[2]) / f, touch)
+        if contact is None:
+            break
+        up_to_touch = int(contact // frame_dt) + 1  # frames 0 .. the last before the touch
+        if not min_fall_frames(fit_px) <= up_to_touch < count:
+            break
+        count = up_to_touch
+    return count, fit, contact
+
+
 def estimate_camera(
     masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
     frame_dt: float,  # seconds between frames
@@ -501,7 +549,8 @@ def estimate_camera(
     f = math.sqrt(fx * fy)  # for lengths in any direction (square pixels: fx = fy)
     track = mask_track(masks)
     count = _free_fall_frames(track, frame_dt, fit_px)
-    params, positions, rms, depth_error = _fit_fall(track, count, frame_dt, K.numpy())
+    count, fit, touch_s = _fit_to_touch(track, count, frame_dt, K.numpy(), fit_px, touch)
+    params, positions, rms, depth_error = fit
     pitch = float(params[6])
     down = np.array([0.0, math.cos(pitch), math.sin(pitch)])  # world down in the camera frame
     metres_per_px = float(params[2]) / f  # at the object's frame-0 depth
@@ -515,11 +564,7 @@ def estimate_camera(
             source="camera from the video",
         )
     below = (track.bottom[0] - track.centroid[0, 1]) * metres_per_px  # frame 0: centre to bottom
-    contact = None
-    if ground_from_touch:
-        path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
-        falling = fy * path[:, 1] / path[:, 2] + cy
-        contact = contact_time(track, count, frame_dt, falling, metres_per_px, touch)
+    contact = touch_s if ground_from_touch else None
     if contact is not None:
         # the ground (module doc, 2): the centre at the touch plus the object's extent below
         # its centre (frame 0's silhouette at frame 0's depth)
