@@ -261,11 +261,13 @@ def load_observation(
         chosen = subtract_background(rgb, plate)
         mask_source = f"background subtraction (clean plate {background})"
     else:
-        colour = backdrop_colour(rgb)
-        chosen = subtract_background(rgb, colour)
-        mask_source = "background subtraction (border colour)"
-        black = float(colour.max()) <= BLACK_LEVEL
-        if segment is not None and not _plausible(chosen, border_is_uniform(rgb)):
+        uniform = border_is_uniform(rgb)
+        if segment is None or uniform:  # a border of many colours: no backdrop colour to try
+            colour = backdrop_colour(rgb)
+            chosen = subtract_background(rgb, colour)
+            mask_source = "background subtraction (border colour)"
+            black = float(colour.max()) <= BLACK_LEVEL
+        if segment is not None and (not uniform or not _plausible(chosen, uniform)):
             chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
             black = False
