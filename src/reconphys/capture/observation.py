@@ -140,11 +140,10 @@ def stored_observation(
 BLACK_LEVEL = 0.05  # a border colour whose channels all stay below this is a black backdrop
 
 
-def _plausible(masks: Tensor, uniform_border: bool) -> bool:
-    """Whether the border colour's masks can stand: a one-colour border and masks that pass
-    :func:`check_masks` (a floor near the border's colour can pass the first, not the second)."""
-    if not uniform_border:
-        return False
+def _plausible(masks: Tensor) -> bool:
+    """Whether the border colour's masks (of a one-colour border) can stand: masks that pass
+    :func:`check_masks` (a floor near the border's colour makes a one-colour border, not
+    these)."""
     try:
         check_masks(masks, "border colour")
     except InputError:
@@ -267,7 +266,7 @@ def load_observation(
             chosen = subtract_background(rgb, colour)
             mask_source = "background subtraction (border colour)"
             black = float(colour.max()) <= BLACK_LEVEL
-        if segment is not None and (not uniform or not _plausible(chosen, uniform)):
+        if segment is not None and not (uniform and _plausible(chosen)):
             chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
             mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
             black = False
