@@ -8,8 +8,10 @@ pixels, as ``evaluate``); Chamfer distance (squared, m², as ``evaluate``) betwe
 and the true Gaussian centres at frame 0. Rows:
 
 - each ``--model`` (a whole-frame model, or a crop model with the object's distance read from
-  the video's free fall as ``predict`` reads it, ``object_distance``; ``--truth-depth`` adds the
-  crop models with the true distance);
+  the video's free fall as ``predict`` reads it, ``object_distance``, its Gaussians on the
+  finer crop ``predict`` puts them on, ``reconstruct.DETAIL_FACTOR`` times the model's;
+  ``--truth-depth`` adds the crop models with the true distance; ``--detail S`` a row with the
+  Gaussians on an S-px crop, 0: the model's own);
 - the trivial geometry: a flat cut-out of the input view's object pixels, at the distance the
   video gives (2 m for the plain look's whole-frame model), one pixel-sized Gaussian each;
 - the true Gaussians † (an upper bound: on the realistic look the frames are lit, shaded, noisy
@@ -47,6 +49,14 @@ def main() -> None:
     parser.add_argument("--split", default="test")
     parser.add_argument("--model", action="append", default=None, help="repeatable")
     parser.add_argument("--truth-depth", action="store_true")
+    parser.add_argument(
+        "--detail",
+        action="append",
+        type=int,
+        default=[],
+        help="crop models: a row with the Gaussians on an S-px crop (0: the model's size); "
+        "repeatable. The model's row is predict's (reconstruct.DETAIL_FACTOR)",
+    )
     parser.add_argument("--limit", type=int, default=None)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
@@ -114,6 +124,13 @@ def main() -> None:
                 line.append(add(name, gaussians, cameras, targets, truth.means))
             except InputError as e:
                 line.append(f"{name}: refused ({e})")
+            for detail in args.detail if loaded.model.config.crop else []:
+                try:
+                    gaussians, _ = predicted_gaussians(observation, loaded, detail=detail)
+                    row = f"{name} (detail {detail or loaded.model.config.resolution} px)"
+                    line.append(add(row, gaussians, cameras, targets, truth.means))
+                except InputError as e:
+                    line.append(f"{name}: refused ({e})")
             if loaded.model.config.crop and args.truth_depth:
                 gaussians, _ = predicted_gaussians(observation, loaded, distance=true_depth)
                 line.append(

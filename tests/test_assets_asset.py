@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from reconphys.assets.asset import PhysicsSettings, read_asset, write_asset
-from reconphys.assets.build import build_asset
+from reconphys.assets.build import build_asset, with_gaussians
 from reconphys.assets.normalize import place_on_ground
 from reconphys.assets.procedural import make_procedural_gaussians
 from reconphys.errors import InputError
@@ -45,6 +45,24 @@ def test_written_asset_simulates_identically(small_asset, tmp_path):
     ]
     assert runs[0].x[..., 2].min() == 0.0, "the run must reach the ground"
     assert torch.equal(runs[0].x, runs[1].x)
+
+
+def test_other_gaussians_on_the_same_anchors(small_asset):
+    """with_gaussians binds as build_asset does: the asset's own Gaussians come back bound
+    exactly as built; finer ones of the same box move with the same anchors (the physics is
+    untouched), each weighted over its nearest anchors."""
+    same = with_gaussians(small_asset, small_asset.gaussians)
+    assert torch.equal(same.binding_index, small_asset.binding_index)
+    assert torch.equal(same.binding_weight, small_asset.binding_weight)
+    finer = place_on_ground(make_procedural_gaussians("box", 2400, seed=2, size=0.3), 0.05)
+    other = with_gaussians(small_asset, finer)
+    assert other.gaussians.num_gaussians == 2400
+    assert torch.equal(other.x0, small_asset.x0) and torch.equal(other.springs, small_asset.springs)
+    assert other.physics == small_asset.physics
+    assert other.binding_index.shape[0] == 2400
+    assert torch.allclose(other.binding_weight.sum(-1), torch.ones(2400), atol=1e-5)
+    nearest = torch.cdist(finer.means, small_asset.x0).argmin(-1)  # [2400]
+    assert bool((other.binding_index == nearest[:, None]).any(-1).all())
 
 
 def test_per_element_attributes_round_trip_and_are_used(small_asset, tmp_path):

@@ -59,6 +59,23 @@ def build_asset(
     )
 
 
+def with_gaussians(asset: Asset, gaussians: Gaussians) -> Asset:
+    """The asset with other Gaussians (world frame, at the asset's initial pose; no batch dims)
+    on the same anchors and springs, each bound to its nearest anchors as :func:`build_asset`
+    binds: a finer appearance on the same physics."""
+    means = gaussians.means.detach().cpu()
+    physics = asset.physics
+    index, weight = compute_binding(
+        means, asset.x0, physics.binding_neighbors, physics.binding_power
+    )
+    return replace(
+        asset,
+        gaussians=gaussians.map(lambda t: t.detach().cpu().float()),
+        binding_index=index,
+        binding_weight=weight,
+    )
+
+
 def build_from_gaussians(
     gaussians: Gaussians,  # world-frame Gaussians at their initial pose (no batch dims)
     attributes: Mapping[str, float],  # mass (kg/anchor), stiffness, damping, friction

@@ -126,16 +126,49 @@ class GaussianPredictor(nn.Module):
         K: Tensor,  # [B, 3, 3] pixels at config.resolution
         world_to_cam: Tensor,  # [B, 4, 4]
         reference_depth: Tensor | None = None,  # [B] metres (camera z of the object's centre)
-    ) -> Gaussians:  # [B, R², ·] world frame
+        detail: tuple[Tensor, Tensor] | None = None,  # crop models: the same crop at S ≥ R px,
+        # ([B, S, S, 3] image, [B, S, S] mask): one Gaussian per pixel of it (upsampled_outputs)
+    ) -> Gaussians:  # [B, R², ·] world frame ([B, S², ·] with detail)
         """Per pixel one Gaussian. ``reference_depth`` is required by a crop model (its depths
-        and sizes are relative to it) and ignored by the others (config.reference_depth)."""
+        and sizes are relative to it) and ignored by the others (config.reference_depth).
+
+        ``detail``: the network still reads the R-px crop, but its per-pixel outputs are
+        resampled to S px (:func:`upsampled_outputs`) and each S-px pixel gets a Gaussian on its
+        own ray, with its own colour and sizes × R / S — the appearance at the recording's
+        resolution on the geometry the network predicts at R (S = R gives the plain forward)."""
         c = self.config
         batch, size = images.shape[0], images.shape[1]
         if size != c.resolution or images.shape[2] != c.resolution:
             raise ValueError(f"images: expected {c.resolution}² pixels, got {list(images.shape)}")
         rays = pixel_rays(K.to(images.dtype), size)  # [B, R, R, 3]
         x = torch.cat([images, masks[..., None], rays], dim=-1).permute(0, 3, 1, 2)
-        out = self.unet(x).permute(0, 2, 3, 1).reshape(batch, size * size, OUTPUT_CHANNELS)
+        out = self.unet(x).permute(0, 2, 3, 1)  # [B, R, R, C]
+        shrink = 0.0  # log of the Gaussians' size factor
+        if detail is not None:
+            if not c.crop:
+                raise ValueError("detail: only a crop 3DGS predictor reads a finer crop")
+            images, fine_masks = detail
+            fine = images.shape[1]
+            if (
+                images.shape[1:] != (fine, fine, 3)
+                or fine < size
+                or fine_masks.shape[1:]
+                != (
+                    fine,
+                    fine,
+                )
+            ):
+                raise ValueError(
+                    f"detail: expected [B, S, S, 3] and [B, S, S] with S ≥ {size}, got "
+                    f"{list(images.shape)} and {list(fine_masks.shape)}"
+                )
+            out = upsampled_outputs(out, masks, fine)
+            K = K.clone()
+            K[:, :2] = K[:, :2] * (fine / size)  # the same crop at S px: K scales with it
+            rays = pixel_rays(K.to(images.dtype), fine)
+            shrink = math.log(size / fine)
+            size = fine
+        out = out.reshape(batch, size * size, OUTPUT_CHANNELS)
         if c.crop:
             if reference_depth is None:
                 raise ValueError("a crop 3DGS predictor needs reference_depth (metres)")
@@ -152,7 +185,7 @@ class GaussianPredictor(nn.Module):
         means = (points_cam - translation[:, None]) @ rotation  # Rᵀ (x − t), row vectors
         low = math.log(c.min_scale) + torch.log(unit)
         high = math.log(c.max_scale) + torch.log(unit)
-        log_scales = low + (high - low) * torch.sigmoid(out[..., 4:7])
+        log_scales = low + (high - low) * torch.sigmoid(out[..., 4:7]) + shrink
         # quaternions are in the camera frame: rotate them to the world frame (q_w = q_R⁻¹ ⊗ q)
         quats = _rotate_quaternions(F.normalize(out[..., 7:11], dim=-1), rotation)
         if c.crop:  # the pixel's own colour, corrected: the input view stays sharp
@@ -167,6 +200,27 @@ class GaussianPredictor(nn.Module):
             opacity_logits=out[..., 11],
             sh0=(rgb - 0.5) / SH_C0,
         )
+
+
+def upsampled_outputs(
+    out: Tensor,  # [B, R, R, C] the network's raw per-pixel outputs
+    masks: Tensor,  # [B, R, R] in {0, 1}: the object's pixels at R
+    size: int,  # S ≥ R
+) -> Tensor:  # [B, S, S, C]
+    """The outputs resampled to S px (bilinear), weighted by the mask: an S-px pixel at the
+    object's edge takes its neighbours on the object, not the background pixels' outputs (whose
+    depths nothing trained: a Gaussian there would fly off the surface). Where no object pixel
+    is near, the plain bilinear value."""
+    channels_first = out.permute(0, 3, 1, 2)
+    weight = masks[:, None].to(out.dtype)
+    if size == out.shape[1]:
+        return out
+    up = dict(size=(size, size), mode="bilinear", align_corners=False)
+    weighted = F.interpolate(channels_first * weight, **up)
+    total = F.interpolate(weight, **up)
+    plain = F.interpolate(channels_first, **up)
+    result = torch.where(total > 1e-3, weighted / total.clamp_min(1e-3), plain)
+    return result.permute(0, 2, 3, 1)
 
 
 def _rotate_quaternions(quats: Tensor, world_to_cam_rotation: Tensor) -> Tensor:

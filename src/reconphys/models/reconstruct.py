@@ -164,15 +164,24 @@ def object_distance(observation: Observation) -> tuple[float, str]:
     return distance, how
 
 
+# The crop the Gaussians are put on, in multiples of the model's own (3: 48 → 144 px, 9 times
+# the Gaussians; docs/usage.md#the-object-in-detail-2026-11-29)
+DETAIL_FACTOR = 3
+
+
 def predicted_gaussians(
     observation: Observation,
     gs_model=None,
     distance: float | None = None,  # crop models: the object's distance, metres (None: read it)
+    detail: int | None = None,  # crop models: Gaussians on a crop of this many px a side
+    # (≥ the model's; None: DETAIL_FACTOR times the model's, 0: the model's own size)
 ):
     """Frame 0 → the 3DGS predictor's Gaussians on the object's pixels (world frame), and the
     model's path. ``gs_model``: a path, a loaded predictor, or None (the default one). A crop
     model reads the object's crop of frame 0 (:func:`~reconphys.models.model_input.frame_crop`)
-    and the object's distance (:func:`object_distance`); the others read the frame and its mask
+    and the object's distance (:func:`object_distance`), and puts its Gaussians on the pixels of
+    a finer crop of the same square (``detail``; see GaussianPredictor.forward); the others read
+    the frame and its mask
     resampled to the dataset's intrinsics at the model's size (as the physics network's input),
     so the camera's pose places them."""
     from .gaussian_predictor import prune_gaussians
@@ -186,16 +195,17 @@ def predicted_gaussians(
     size = config.resolution
     w2c = observation.camera.world_to_cam.float()
     if config.crop:
-        frame, mask, K = frame_crop(
-            observation.frames[0].float(),
-            observation.masks[0].float(),
-            observation.camera.K.float(),
-            size,
-            config.crop_margin,
-        )
+        first = observation.frames[0].float(), observation.masks[0].float()
+        K_frame = observation.camera.K.float()
+        frame, mask, K = frame_crop(*first, K_frame, size, config.crop_margin)
         if distance is None:
             distance = object_distance(observation)[0]
         depth = torch.tensor([float(distance)])
+        detail = DETAIL_FACTOR * size if detail is None else detail
+        fine = None
+        if detail > size:  # the same square, finer: the Gaussians' pixels
+            fine_frame, fine_mask, _ = frame_crop(*first, K_frame, detail, config.crop_margin)
+            fine = (fine_frame[None], fine_mask[None])
     else:
         frame = predictor_frames(observation.frames[:1], observation.camera.K, size)[0, 0]
         mask = predictor_frames(
@@ -203,11 +213,12 @@ def predicted_gaussians(
         )[0, 0, ..., 0]
         mask = (mask > 0.5).float()
         K = virtual_intrinsics(size).float()
-        depth = None
+        depth = fine = None
     with torch.no_grad():
-        g = loaded.model(frame[None], mask[None], K[None], w2c[None], depth)
+        g = loaded.model(frame[None], mask[None], K[None], w2c[None], depth, detail=fine)
+    keep = mask if fine is None else fine[1][0]
     try:
-        pruned = prune_gaussians(g.map(lambda t: t[0]), mask.reshape(-1))
+        pruned = prune_gaussians(g.map(lambda t: t[0]), keep.reshape(-1))
     except ValueError as e:
         raise InputError(str(e), source=observation.source) from None
     return pruned.map(lambda t: t.detach().float()), loaded.path

@@ -32,7 +32,7 @@ import torch
 from torch import Tensor
 
 from ..assets.asset import Asset
-from ..assets.build import lifted_above
+from ..assets.build import lifted_above, with_gaussians
 from ..assets.gaussians import Gaussians
 from ..capture import Observation
 from ..capture.calibrate import check_touch
@@ -47,6 +47,7 @@ from ..models.gaussian_shipped import (
 from ..models.model_input import network_input
 from ..models.physics_predictor import network_sigma
 from ..models.reconstruct import (
+    DETAIL_FACTOR,
     initial_velocity_fit,
     object_distance,
     observed_asset,
@@ -394,6 +395,7 @@ def predict_observation(
     dataset_asset = None if truth is None else truth.asset
     build_new = True  # a new asset from given or predicted Gaussians (not the dataset's own)
     object_centric = False  # the geometry is the object-centric 3DGS predictor's
+    detailed = None  # its Gaussians on the finer crop: the asset's appearance (after the search)
     if gaussians is not None and mesh is not None:
         raise InputError("give either --gaussians or --mesh, not both", field="--mesh")
     given = gaussians if gaussians is not None else mesh
@@ -419,7 +421,11 @@ def predict_observation(
         if object_centric:  # the object-centric predictor places the object at its distance
             distance, how = object_distance(observation)
             details["object_distance"] = {"m": round(distance, 4), "how": how}
-        placed, gs_path = predicted_gaussians(observation, gs_model, distance)
+        # the physics is read on the Gaussians at the model's size (as the search was tuned);
+        # the asset carries those on the finer crop (reconstruct.DETAIL_FACTOR), on its anchors
+        placed, gs_path = predicted_gaussians(observation, gs_model, distance, detail=0)
+        if object_centric and DETAIL_FACTOR > 1:
+            detailed = predicted_gaussians(observation, gs_model, distance)[0]
         details["geometry"] = f"predicted by the 3DGS predictor {gs_path} from frame 0"
         object_id = f"predicted-{Path(observation.source).stem}"
     if build_new:
@@ -519,6 +525,8 @@ def predict_observation(
         )
     else:
         asset = replace(dataset_asset, physics=replace(dataset_asset.physics, **attributes))
+    if detailed is not None:  # how the asset's Gaussians were moved (lifted_above)
+        shift = asset.gaussians.means[0] - placed.means[0]
     timings["asset_build"] = time.perf_counter() - started
     details["anchors"] = asset.num_anchors
     details["springs"] = int(asset.springs.shape[0])
@@ -571,6 +579,16 @@ def predict_observation(
         )
         timings["refine"] = time.perf_counter() - started
         details["refine"] = history
+    if detailed is not None:  # the finer Gaussians, moved as the asset's were (lifted_above)
+        started = time.perf_counter()
+        asset = with_gaussians(asset, detailed.with_means(detailed.means + shift))
+        timings["asset_build"] += time.perf_counter() - started
+        details["gaussians"] = asset.gaussians.num_gaussians
+        details["geometry"] += (
+            f" (the physics read on its {placed.num_gaussians} Gaussians of the model's "
+            f"{gs_model.model.config.resolution}-px crop; the asset's on the "
+            f"{DETAIL_FACTOR * gs_model.model.config.resolution}-px crop)"
+        )
     if truth is not None:
         details["truth"] = truth.attributes
     return PredictResult(asset, observation, attributes, timings, details, intervals)
