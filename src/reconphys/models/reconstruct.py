@@ -103,8 +103,9 @@ def feed_forward_asset(
     """What the feed-forward pipeline builds without a PLY: the 3DGS predictor's Gaussians from
     frame 0, the initial linear velocity from the masks, anchors/springs/binding by the settings
     ``data`` (see :func:`observed_asset`), on the camera's ground. Used to train the physics
-    network on predicted geometry (``data.geometry = "predicted"``)."""
-    placed, _ = predicted_gaussians(observation, gs_model)
+    network on predicted geometry (``data.geometry = "predicted"``): the Gaussians at the model's
+    own size (``detail=0``), the geometry predict reads the physics on."""
+    placed, _ = predicted_gaussians(observation, gs_model, detail=0)
     return observed_asset(
         placed,
         observation,
