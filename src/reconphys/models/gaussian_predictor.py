@@ -27,6 +27,11 @@ from ..assets.gaussians import SH_C0, Gaussians
 from ..geometry import matrix_to_quaternion, quaternion_multiply
 
 OUTPUT_CHANNELS = 1 + 3 + 3 + 4 + 1 + 3  # depth, offset, log-scale, quaternion, opacity, colour
+# On a finer crop (forward's detail) each Gaussian is this many fine pixels' worth of the
+# model's size (R/S of it, never more than 1×): a little more than its pixel, so neighbours
+# overlap as the springs bend the asset. Chosen between 1 and 1.5 on validation drops (4-view
+# PSNR 16.85 / 17.00 dB; docs/usage.md#the-object-in-detail-2026-11-29)
+DETAIL_OVERLAP = 1.5
 
 
 @dataclass
@@ -134,8 +139,9 @@ class GaussianPredictor(nn.Module):
 
         ``detail``: the network still reads the R-px crop, but its per-pixel outputs are
         resampled to S px (:func:`upsampled_outputs`) and each S-px pixel gets a Gaussian on its
-        own ray, with its own colour and sizes × R / S — the appearance at the recording's
-        resolution on the geometry the network predicts at R (S = R gives the plain forward)."""
+        own ray, with its own colour and sizes × min(1, DETAIL_OVERLAP · R / S) — the appearance
+        at the recording's resolution on the geometry the network predicts at R (S = R gives
+        the plain forward)."""
         c = self.config
         batch, size = images.shape[0], images.shape[1]
         if size != c.resolution or images.shape[2] != c.resolution:
@@ -166,7 +172,7 @@ class GaussianPredictor(nn.Module):
             K = K.clone()
             K[:, :2] = K[:, :2] * (fine / size)  # the same crop at S px: K scales with it
             rays = pixel_rays(K.to(images.dtype), fine)
-            shrink = math.log(size / fine)
+            shrink = min(0.0, math.log(DETAIL_OVERLAP * size / fine))
             size = fine
         out = out.reshape(batch, size * size, OUTPUT_CHANNELS)
         if c.crop:
