@@ -156,13 +156,9 @@ class GaussianPredictor(nn.Module):
             images, fine_masks = detail
             fine = images.shape[1]
             if (
-                images.shape[1:] != (fine, fine, 3)
-                or fine < size
-                or fine_masks.shape[1:]
-                != (
-                    fine,
-                    fine,
-                )
+                fine < size
+                or images.shape[1:] != (fine, fine, 3)
+                or fine_masks.shape[1:] != images.shape[1:3]
             ):
                 raise ValueError(
                     f"detail: expected [B, S, S, 3] and [B, S, S] with S ≥ {size}, got "
@@ -217,10 +213,10 @@ def upsampled_outputs(
     object's edge takes its neighbours on the object, not the background pixels' outputs (whose
     depths nothing trained: a Gaussian there would fly off the surface). Where no object pixel
     is near, the plain bilinear value."""
-    channels_first = out.permute(0, 3, 1, 2)
-    weight = masks[:, None].to(out.dtype)
     if size == out.shape[1]:
         return out
+    channels_first = out.permute(0, 3, 1, 2)
+    weight = masks[:, None].to(out.dtype)
     up = dict(size=(size, size), mode="bilinear", align_corners=False)
     weighted = F.interpolate(channels_first * weight, **up)
     total = F.interpolate(weight, **up)
