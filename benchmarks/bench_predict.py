@@ -15,8 +15,9 @@ Two cases, each timed end to end through :func:`reconphys.pipeline.predict.predi
 ``--realistic DATA`` (a ``make-data --scene realistic`` dataset) adds the path a phone video
 takes: view 0 of its first test sample as the mp4 alone (no camera file, no PLY, no masks), so
 ``decode`` holds the mask segmenter (its share printed as ``masks``) and the camera read from
-the fall, and the object-centric networks make the Gaussians and read the physics; where the CPU
-runs bfloat16 natively, the same with the segmenter in float32 (the fast path's twin, the ratio
+the fall, and the object-centric networks make the Gaussians and read the physics; the same with
+the segmenter on whole frames (the twin of following the object, the ratio printed); where the
+CPU runs bfloat16 natively, the same with the segmenter in float32 (the fast path's twin, the ratio
 printed); then the same clip resized to 1080 × 1080 (a phone's shorter side), then — once, not
 best of — a cold ``reconphys predict --no-refine --preview-frames 0`` process on the mp4, what a
 user waits for (interpreter, imports and model loads included).
@@ -79,20 +80,23 @@ def export_video(data: str, sample: str, out: Path) -> Path:
 
 class SegmenterClock:
     """Seconds spent in the mask segmenter (pipeline.samples.segment_frames) while installed;
-    ``bfloat16=False`` runs it in float32 (the reference twin of the bfloat16 fast path)."""
+    ``bfloat16=False`` runs it in float32 (the reference twin of the bfloat16 fast path),
+    ``track=False`` on whole frames (the reference twin of following the object)."""
 
-    def __init__(self, bfloat16: bool | None = None):
+    def __init__(self, bfloat16: bool | None = None, track: bool = True):
         self.seconds = 0.0
         self._segment = samples.segment_frames
         self.bfloat16 = bfloat16
+        self.track = track
 
     def __enter__(self):
         def timed(frames):
             started = time.perf_counter()
             try:
-                if self.bfloat16 is None:
+                if self.bfloat16 is None and self.track:
                     return self._segment(frames)
-                return segment_clip(samples._segmenter(), frames, bfloat16=self.bfloat16)
+                model = samples._segmenter()
+                return segment_clip(model, frames, bfloat16=self.bfloat16, track=self.track)
             finally:
                 self.seconds += time.perf_counter() - started
 
@@ -117,17 +121,21 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
         + " ".join(f"{s:>15s}" for s in STEPS)
         + f" {'of which masks':>14s} {'all four':>9s}"
     )
-    cases = [("mp4 alone", video, None), ("mp4 1080×1080", tmp / "large.mp4", None)]
+    cases = [
+        ("mp4 alone", video, None, True),
+        ("mp4, whole frames", video, None, False),  # the twin of following the object
+        ("mp4 1080×1080", tmp / "large.mp4", None, True),
+    ]
     if native_bfloat16():  # the segmenter's bfloat16 fast path is taken: time its twin too
-        cases.insert(1, ("mp4, float32 seg", video, False))
+        cases.insert(1, ("mp4, float32 seg", video, False, True))
     masks_seconds = {}
-    for name, path, bfloat16 in cases:
+    for name, path, bfloat16, track in cases:
         kwargs = dict(input=str(path), device=device, refine=False)
-        with SegmenterClock(bfloat16):
+        with SegmenterClock(bfloat16, track):
             result = predict(**kwargs)  # warm-up: model loads, Numba, allocator
         runs = []
         for _ in range(repeats):
-            with SegmenterClock(bfloat16) as clock:
+            with SegmenterClock(bfloat16, track) as clock:
                 timings = predict(**kwargs).timings
             runs.append({**timings, "masks": clock.seconds})
         best = {step: min(run[step] for run in runs) for step in (*STEPS, "masks")}
@@ -139,7 +147,9 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
             + f" {best['masks']:14.4f} {sum(best[s] for s in STEPS):9.4f}"
         )
         masks_seconds[name] = best["masks"]
-    if len(masks_seconds) == 3:
+    ratio = masks_seconds["mp4, whole frames"] / masks_seconds["mp4 alone"]
+    print(f"segmenter on whole frames / following the object: {ratio:.2f}×")
+    if "mp4, float32 seg" in masks_seconds:
         ratio = masks_seconds["mp4, float32 seg"] / masks_seconds["mp4 alone"]
         print(f"segmenter float32 / bfloat16 (this CPU runs bfloat16 natively): {ratio:.2f}×")
     else:

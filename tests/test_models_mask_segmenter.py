@@ -19,6 +19,7 @@ from reconphys.data import DropDataset, GeneratedDropDataset, make_dataset, make
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import (
     SHIPPED_MASKS_PATHS,
+    Box,
     MaskSegmenter,
     SegmenterConfig,
     SegmenterEnsemble,
@@ -30,6 +31,7 @@ from reconphys.models.mask_segmenter import (
     native_bfloat16,
     segment_clip,
     shipped_fingerprint,
+    tracked_logits,
 )
 from reconphys.pipeline.samples import segment_frames
 from reconphys.render.video import write_mp4
@@ -172,15 +174,81 @@ def test_the_channels_last_fast_path_matches_its_reference(realistic_views):
     frames = realistic_views[0][0]
     for clip, side in ((frames, 128), (frames.repeat_interleave(3, 1).repeat_interleave(3, 2), 96)):
         layouts.clear()
-        fast = clip_logits(model, clip, max_side=side, bfloat16=False)
+        fast = clip_logits(model, clip, max_side=side, bfloat16=False, track=False)
         assert layouts and all(layouts)  # the fast path was taken
         layouts.clear()
-        reference = clip_logits(model, clip, max_side=side, channels_last=False, bfloat16=False)
+        reference = clip_logits(
+            model, clip, max_side=side, channels_last=False, bfloat16=False, track=False
+        )
         assert layouts and not any(layouts)
         assert fast.shape == reference.shape == clip.shape[:3] and fast.is_contiguous()
         assert (fast - reference).abs().max() < 2e-3, (fast - reference).abs().max()
         assert ((fast > 0) != (reference > 0)).float().mean() < 1e-3
     hook.remove()
+
+
+def test_following_the_object_reproduces_an_exact_segmenter():
+    """tracked_logits with an oracle for a segmenter (its logits: +5 on the object, −5 off it,
+    whatever the window) must give the whole frame's masks exactly, for an object that falls,
+    bounces, vanishes for two frames and jumps across the frame — in windows for most frames,
+    the whole frame where the object left its window or was not found."""
+    frames, height, width = 40, 128, 96
+    truth = torch.zeros(frames, height, width, dtype=torch.bool)
+    row = 4.0
+    for t in range(frames):
+        row = 4 + 0.35 * t * t if t < 16 else max(4.0, 93 - 6 * (t - 16))  # fall, then up
+        col = 20 + t if t < 30 else 84  # a jump at frame 30
+        if t not in (24, 25):  # out of sight
+            truth[t, round(row) : round(row) + 12, col : col + 10] = True
+    calls = []
+
+    def oracle(indices, window=None):
+        windows = window if isinstance(window, list) else [window] * len(indices)
+        calls.extend((i, w) for i, w in zip(indices, windows, strict=True))
+        crops = []
+        for i, w in zip(indices, windows, strict=True):
+            rows, cols = (slice(None), slice(None)) if w is None else w.slices()
+            crops.append(truth[i][rows, cols].float() * 10 - 5)
+        return torch.stack(crops)
+
+    logits = tracked_logits(oracle, frames, height, width)
+    assert torch.equal(logits > 0, truth)
+    assert float(logits[~truth].max()) < 0
+    windowed = [w for _, w in calls if w is not None]
+    assert len(windowed) >= frames * 2 // 3  # most frames were segmented in a window
+    assert all((w.bottom - w.top) * (w.right - w.left) < 0.6 * height * width for w in windowed)
+    whole = [i for i, w in calls if w is None]
+    assert whole[:2] == [0, 1] and {24, 25, 30} <= set(whole)  # not found; the jump
+    assert Box.of(truth[3]) == Box(7, 19, 23, 33) and Box.of(truth[24]) is None
+
+
+def test_following_the_object_on_a_realistic_clip(realistic_views):
+    """The default (``track=True``) against its reference twin, the whole frame, at 192 px:
+    windows were used where the object is small enough, the masks agree with the whole frame's
+    and are about as close to the truth; a clip too small for a window is segmented whole, the
+    same logits."""
+    model = load_mask_segmenter()
+    sizes = []
+    hook = model.members[0].register_forward_pre_hook(lambda _, args: sizes.append(args[0].shape))
+    tracked = 0
+    for frames, truth in realistic_views:
+        big, big_truth = (
+            x.repeat_interleave(3, 1).repeat_interleave(3, 2) for x in (frames, truth)
+        )
+        sizes.clear()
+        masks = segment_clip(model, big, max_side=192, bfloat16=False)
+        tracked += any(size[-1] < 192 for size in sizes)  # windows were segmented
+        reference = segment_clip(model, big, max_side=192, bfloat16=False, track=False)
+        assert masks.shape == reference.shape == big_truth.shape
+        assert iou(masks, reference) > 0.85, iou(masks, reference)  # 1.0 and 0.95
+        assert iou(masks, big_truth) > iou(reference, big_truth) - 0.03
+        sizes.clear()
+        small = clip_logits(model, frames, bfloat16=False)  # 64 px: no window fits
+        assert all(size[-2:] == (64, 64) for size in sizes)
+        whole = clip_logits(model, frames, bfloat16=False, track=False)  # in other batches
+        assert torch.allclose(small, whole, atol=1e-3) and torch.equal(small > 0, whole > 0)
+    hook.remove()
+    assert tracked == 1  # the first clip's object spans over half the frame: whole frames
 
 
 def test_the_bfloat16_fast_path_matches_its_reference(realistic_views):

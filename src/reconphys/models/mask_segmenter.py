@@ -18,7 +18,9 @@ its ``.json``): their logits are averaged (``SegmenterEnsemble``).
 from __future__ import annotations
 
 import json
+import math
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -42,6 +44,14 @@ SHIPPED_MASKS_PATHS = (  # the shipped ensemble's members (docs/usage.md#two-net
 FRAMES_PER_CALL = 8  # bounds memory at large resolutions
 MAX_SIDE = 128  # px: a larger clip is segmented area-averaged down to this, the logits upsampled
 MAIN_BLOB_SHARE = 0.2  # regions smaller than this share of the largest are dropped
+# Following the object (clip_logits' ``track``; docs/usage.md#following-the-object-2026-11-29):
+TRACK_MARGIN = 24  # px of the segmented clip around the object's last box, each side
+TRACK_MIN_SIDE = 80  # px: no window smaller (the network trained on 96-px windows)
+TRACK_SPAN = 2.0  # a window side is at least this many times the object's (GroupNorm's statistics)
+TRACK_QUANTUM = 16  # px: window sides are multiples of this (few shapes; the U-Net's stride)
+TRACK_CHUNK = 5  # frames segmented together, each in its own window of one shared size
+TRACK_MAX_SHARE = 0.6  # a window over this share of the frame: the whole frame instead
+OUTSIDE_LOGIT = -20.0  # the logit of a pixel outside its frame's window: background
 
 
 def native_bfloat16() -> bool:
@@ -150,12 +160,21 @@ def clip_logits(
     max_side: int = MAX_SIDE,
     channels_last: bool = True,
     bfloat16: bool | None = None,
+    track: bool = True,
 ) -> Tensor:
     """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera).
 
     The network saw 96-px clips: its receptive field spans an object there, not in a phone's
     1080p frame. A clip whose longer side exceeds ``max_side`` is segmented area-averaged down
     to it and the logits are resampled (bilinear) to the clip's size (docs/usage.md).
+
+    ``track`` (the default) segments frames 0–1 whole and every later frame in a window around
+    where the object's last two frames put it (:func:`tracked_logits`: 2–3× less work on a
+    128-px clip; pixels outside a window are background); a frame whose object leaves its
+    window, or is not found in it, is segmented whole. Not the same arithmetic: GroupNorm's
+    statistics are the window's, so the masks differ from the whole frame's (``track=False``,
+    the reference twin) by a few edge pixels, measured in docs/usage.md and compared by a test.
+    A clip too small for a window smaller than TRACK_MAX_SHARE of it is segmented whole.
 
     ``channels_last`` (the fast path) hands the network its inputs pixel-major ([B, H, W, C] in
     memory), the layout the CPU's convolutions run fastest in: the same arithmetic summed in
@@ -176,29 +195,174 @@ def clip_logits(
         factor = max_side / max(height, width)
         size = (max(1, round(height * factor)), max(1, round(width * factor)))
         small = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
-        logits = clip_logits(model, small.permute(0, 2, 3, 1), max_side, channels_last, bfloat16)
+        small = small.permute(0, 2, 3, 1)
+        logits = clip_logits(model, small, max_side, channels_last, bfloat16, track)
         return F.interpolate(logits[:, None], size=(height, width), mode="bilinear")[:, 0]
     references = clip_references(frames)
     times = torch.linspace(0, 1, frames.shape[0])
     layout = torch.channels_last if channels_last else torch.contiguous_format
     if bfloat16 is None:  # the CPU's fast path; on a GPU the networks stay in float32
         bfloat16 = frames.device.type == "cpu" and native_bfloat16()
+
+    def run(indices: list[int], window: Box | list[Box] | None = None) -> Tensor:
+        """Logits [n, h, w] of frames ``indices``, each in its window (one size) or whole."""
+        windows = window if isinstance(window, list) else [window] * len(indices)
+        inputs = []
+        for index, box in zip(indices, windows, strict=True):
+            rows, cols = (slice(None), slice(None)) if box is None else box.slices()
+            inputs.append(
+                frame_inputs(
+                    frames[index : index + 1, rows, cols],
+                    references[..., rows, cols],
+                    times[index : index + 1],
+                )
+            )
+        inputs = torch.cat(inputs).contiguous(memory_format=layout)
+        with torch.autocast(frames.device.type, dtype=torch.bfloat16, enabled=bfloat16):
+            return model(inputs).float()
+
+    if track:
+        return tracked_logits(run, frames.shape[0], height, width)
     logits = []
     for start in range(0, frames.shape[0], FRAMES_PER_CALL):
-        part = slice(start, start + FRAMES_PER_CALL)
-        inputs = frame_inputs(frames[part], references, times[part])
-        with torch.autocast(frames.device.type, dtype=torch.bfloat16, enabled=bfloat16):
-            logits.append(model(inputs.contiguous(memory_format=layout)).float())
+        logits.append(run(list(range(start, min(start + FRAMES_PER_CALL, frames.shape[0])))))
     return torch.cat(logits).contiguous()
 
 
+@dataclass(frozen=True)
+class Box:
+    """Rows [top, bottom) and columns [left, right) of a frame, in pixels."""
+
+    top: int
+    bottom: int
+    left: int
+    right: int
+
+    def slices(self) -> tuple[slice, slice]:
+        return slice(self.top, self.bottom), slice(self.left, self.right)
+
+    @property
+    def centre(self) -> tuple[float, float]:
+        return (self.top + self.bottom) / 2, (self.left + self.right) / 2
+
+    @staticmethod
+    def of(mask: Tensor) -> Box | None:
+        """The bounding box of a mask [H, W] bool; None when it is empty."""
+        rows, cols = torch.nonzero(mask.any(1))[:, 0], torch.nonzero(mask.any(0))[:, 0]
+        if len(rows) == 0:
+            return None
+        return Box(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+
+
+def _window_side(extent: int, frame: int) -> int:
+    """A window side (px) holding ``extent`` px and the margins, within a ``frame``-px side."""
+    side = max(extent + 2 * TRACK_MARGIN, math.ceil(TRACK_SPAN * extent), TRACK_MIN_SIDE)
+    return min(-(-side // TRACK_QUANTUM) * TRACK_QUANTUM, frame)
+
+
+def _placed(centre: float, side: int, frame: int) -> tuple[int, int]:
+    start = min(max(round(centre - side / 2), 0), frame - side)
+    return start, start + side
+
+
+def tracked_logits(run: Callable[..., Tensor], frames: int, height: int, width: int) -> Tensor:
+    """Logits [T, H, W] of a clip segmented in windows that follow the object (clip_logits'
+    ``track``). ``run(indices, window)`` segments frames: whole (window None) or each in its
+    window. Frames 0–1 are segmented whole; then TRACK_CHUNK frames at a time, each in a window
+    of the last found box's size plus TRACK_MARGIN a side (at least TRACK_MIN_SIDE and
+    TRACK_SPAN times the box), centred where the last two boxes' motion carries it. A frame
+    whose object (its main blob) is not in its window or touches an edge of it that is not the
+    frame's is segmented whole again."""
+    logits = torch.full((frames, height, width), OUTSIDE_LOGIT)
+    boxes: list[Box | None] = [None] * frames
+
+    def found(index: int, values: Tensor, box: Box | None) -> bool:
+        """Keep frame ``index``'s logits ``values`` (of ``box``, None: whole) if the object is
+        inside; its box is then recorded."""
+        blob = keep_main_blob((values > 0)[None])[0]
+        inner = Box.of(blob)
+        if box is not None:
+            if inner is None:
+                return False
+            edges = (
+                (inner.top == 0 and box.top > 0)
+                or (inner.bottom == box.bottom - box.top and box.bottom < height)
+                or (inner.left == 0 and box.left > 0)
+                or (inner.right == box.right - box.left and box.right < width)
+            )
+            if edges:
+                return False
+            inner = Box(
+                inner.top + box.top,
+                inner.bottom + box.top,
+                inner.left + box.left,
+                inner.right + box.left,
+            )
+            logits[index][box.slices()] = values
+        else:
+            logits[index] = values
+        boxes[index] = inner
+        return True
+
+    def whole(indices: list[int]) -> None:
+        for start in range(0, len(indices), FRAMES_PER_CALL):
+            part = indices[start : start + FRAMES_PER_CALL]
+            for index, values in zip(part, run(part), strict=True):
+                found(index, values, None)
+
+    start = min(2, frames)
+    whole(list(range(start)))
+    while start < frames:
+        chunk = list(range(start, min(start + TRACK_CHUNK, frames)))
+        windows = _chunk_windows(
+            boxes[start - 2] if start >= 2 else None, boxes[start - 1], len(chunk), height, width
+        )
+        if windows is None:
+            whole(chunk)
+        else:
+            values = run(chunk, windows)
+            missed = [
+                i for i, v, w in zip(chunk, values, windows, strict=True) if not found(i, v, w)
+            ]
+            whole(missed)
+        start = chunk[-1] + 1
+    return logits
+
+
+def _chunk_windows(
+    before: Box | None, last: Box | None, count: int, height: int, width: int
+) -> list[Box] | None:
+    """Windows (one size) for the ``count`` frames after the one whose object box is ``last``
+    (``before``: the box a frame earlier), or None when the whole frame should be segmented: no
+    box, or a window over TRACK_MAX_SHARE of the frame."""
+    if last is None:
+        return None
+    rows = _window_side(last.bottom - last.top, height)
+    cols = _window_side(last.right - last.left, width)
+    if rows * cols > TRACK_MAX_SHARE * height * width:
+        return None
+    (y, x), (dy, dx) = last.centre, (0.0, 0.0)
+    if before is not None:
+        dy, dx = y - before.centre[0], x - before.centre[1]
+    windows = []
+    for step in range(1, count + 1):
+        top, bottom = _placed(y + step * dy, rows, height)
+        left, right = _placed(x + step * dx, cols, width)
+        windows.append(Box(top, bottom, left, right))
+    return windows
+
+
 def segment_clip(
-    model: Segmenter, frames: Tensor, max_side: int = MAX_SIDE, bfloat16: bool | None = None
+    model: Segmenter,
+    frames: Tensor,
+    max_side: int = MAX_SIDE,
+    bfloat16: bool | None = None,
+    track: bool = True,
 ) -> Tensor:
     """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera): logits
-    above 0 (of the clip at most ``max_side`` px; ``bfloat16``: see clip_logits), the main blob
-    kept."""
-    logits = clip_logits(model, frames, max_side, bfloat16=bfloat16)
+    above 0 (of the clip at most ``max_side`` px; ``bfloat16``, ``track``: see clip_logits), the
+    main blob kept."""
+    logits = clip_logits(model, frames, max_side, bfloat16=bfloat16, track=track)
     return keep_main_blob(logits > 0).float()
 
 
