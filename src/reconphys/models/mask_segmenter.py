@@ -222,7 +222,7 @@ def clip_logits(
             return model(inputs).float()
 
     if track:
-        return tracked_logits(run, frames.shape[0], height, width)
+        return tracked_logits(run, frames.shape[0], height, width, frames.device)
     logits = []
     for start in range(0, frames.shape[0], FRAMES_PER_CALL):
         logits.append(run(list(range(start, min(start + FRAMES_PER_CALL, frames.shape[0])))))
@@ -265,15 +265,21 @@ def _placed(centre: float, side: int, frame: int) -> tuple[int, int]:
     return start, start + side
 
 
-def tracked_logits(run: Callable[..., Tensor], frames: int, height: int, width: int) -> Tensor:
+def tracked_logits(
+    run: Callable[..., Tensor],
+    frames: int,
+    height: int,
+    width: int,
+    device: torch.device | str = "cpu",
+) -> Tensor:
     """Logits [T, H, W] of a clip segmented in windows that follow the object (clip_logits'
     ``track``). ``run(indices, window)`` segments frames: whole (window None) or each in its
     window. Frames 0–1 are segmented whole; then TRACK_CHUNK frames at a time, each in a window
     of the last found box's size plus TRACK_MARGIN a side (at least TRACK_MIN_SIDE and
     TRACK_SPAN times the box), centred where the last two boxes' motion carries it. A frame
     whose object (its main blob) is not in its window or touches an edge of it that is not the
-    frame's is segmented whole again."""
-    logits = torch.full((frames, height, width), OUTSIDE_LOGIT)
+    frame's is segmented whole again. The logits are on ``device`` (``run``'s)."""
+    logits = torch.full((frames, height, width), OUTSIDE_LOGIT, device=device)
     boxes: list[Box | None] = [None] * frames
 
     def found(index: int, values: Tensor, box: Box | None) -> bool:
