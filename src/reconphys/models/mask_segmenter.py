@@ -173,7 +173,9 @@ def clip_logits(
     128-px clip; pixels outside a window are background); a frame whose object leaves its
     window, or is not found in it, is segmented whole. Not the same arithmetic: GroupNorm's
     statistics are the window's, so the masks differ from the whole frame's (``track=False``,
-    the reference twin) by a few edge pixels, measured in docs/usage.md and compared by a test.
+    the reference twin) at their edges — IoU 0.97 between the two on average over 40 test
+    drops, as close to the truth; up to a seventh of the area on a clip where the object meets
+    its shadow — measured in docs/usage.md and compared by a test.
     A clip too small for a window smaller than TRACK_MAX_SHARE of it is segmented whole.
 
     ``channels_last`` (the fast path) hands the network its inputs pixel-major ([B, H, W, C] in
