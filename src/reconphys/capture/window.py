@@ -15,16 +15,25 @@ from .camera import CameraSpec
 CROP_MARGIN = 0.25  # the window around the object: its masks' box grown by this share a side
 
 
+def pixel_bounds(mask: Tensor) -> tuple[int, int, int, int] | None:
+    """(top, bottom, left, right) of a [H, W] bool mask's pixels, bottom and right exclusive;
+    None when it has none."""
+    rows, cols = mask.any(1).nonzero(), mask.any(0).nonzero()
+    if len(rows) == 0:
+        return None
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
 def object_window(masks: Tensor, margin: float = CROP_MARGIN) -> tuple[int, int, int, int] | None:
     """(left, top, width, height) in pixels of the box around every frame's mask [T, H, W] grown
     by ``margin`` of its size on each side (at least 2 px), inside the image; None when no mask
     has a pixel."""
     seen = masks.detach().reshape(-1, *masks.shape[-2:]).amax(0) > 0.5  # [H, W]
-    rows, cols = seen.any(1).nonzero(), seen.any(0).nonzero()
-    if len(rows) == 0:
+    bounds = pixel_bounds(seen)
+    if bounds is None:
         return None
     height, width = seen.shape
-    top, bottom, left, right = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    top, bottom, left, right = bounds
     grow_y = max(2, math.ceil(margin * (bottom - top)))
     grow_x = max(2, math.ceil(margin * (right - left)))
     top, bottom = max(0, top - grow_y), min(height, bottom + grow_y)

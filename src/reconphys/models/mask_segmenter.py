@@ -30,6 +30,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 from torch import Tensor
 
+from ..capture.window import pixel_bounds
 from ..errors import InputError
 from ..io import atomic_file, read_json
 
@@ -247,13 +248,14 @@ class Box:
     def centre(self) -> tuple[float, float]:
         return (self.top + self.bottom) / 2, (self.left + self.right) / 2
 
+    def shifted(self, rows: int, cols: int) -> Box:
+        return Box(self.top + rows, self.bottom + rows, self.left + cols, self.right + cols)
+
     @staticmethod
     def of(mask: Tensor) -> Box | None:
         """The bounding box of a mask [H, W] bool; None when it is empty."""
-        rows, cols = torch.nonzero(mask.any(1))[:, 0], torch.nonzero(mask.any(0))[:, 0]
-        if len(rows) == 0:
-            return None
-        return Box(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+        bounds = pixel_bounds(mask)
+        return None if bounds is None else Box(*bounds)
 
 
 def _window_side(extent: int, frame: int) -> int:
@@ -300,12 +302,7 @@ def tracked_logits(
             )
             if edges:
                 return False
-            inner = Box(
-                inner.top + box.top,
-                inner.bottom + box.top,
-                inner.left + box.left,
-                inner.right + box.left,
-            )
+            inner = inner.shifted(box.top, box.left)
             logits[index][box.slices()] = values
         else:
             logits[index] = values
