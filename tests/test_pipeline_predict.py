@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from reconphys.assets.asset import read_asset
 from reconphys.capture import default_camera, load_observation
-from reconphys.capture.placement import fit_to_mask, linear_velocity_fit
+from reconphys.capture.placement import fit_to_mask, linear_velocity_fit, velocity_residual
 from reconphys.capture.video import resample_indices, resample_times
 from reconphys.cli import app
 from reconphys.errors import InputError
@@ -406,6 +406,29 @@ def test_linear_velocity_from_a_rendered_free_fall(dataset):
     off = (rotation @ (fitted - velocity)).abs()
     assert (off <= 3 * error).all(), (off, error)
     assert float(error[2]) > float(error[:2].max())
+
+
+def test_the_velocity_fits_jacobian_is_autograds():
+    """The Gauss–Newton fit of the initial velocity uses its residual's Jacobian written out
+    (placement.velocity_residual); autograd's of the same residual, for two views, a velocity
+    towards, across and down, and an object near and far."""
+    generator = torch.Generator().manual_seed(3)
+    times = torch.arange(7, dtype=torch.float64) * 0.03
+    drop = -4.905 * times**2
+    for view, distance in ((0, 1.0), (1, 3.0)):
+        camera = default_camera(96, 72, view)
+        centre = torch.randn(3, generator=generator, dtype=torch.float64) * 0.1 * distance
+        centre[2] += 0.4
+        target = torch.rand(7, 2, generator=generator, dtype=torch.float64) * 60
+        growth = 1 + 0.05 * torch.rand(7, generator=generator, dtype=torch.float64)
+        arguments = (centre, times, drop, camera, target, growth, 11.0, 2.5, 0.5)
+        velocity = torch.tensor([0.8, -0.3, 1.1], dtype=torch.float64)
+        residual, jacobian = velocity_residual(velocity, *arguments)
+        reference = torch.autograd.functional.jacobian(
+            lambda v, given=arguments: velocity_residual(v, *given)[0], velocity
+        )
+        assert residual.shape == (7 * 3 + 3,) and jacobian.shape == (7 * 3 + 3, 3)
+        torch.testing.assert_close(jacobian, reference, rtol=1e-10, atol=1e-10)
 
 
 def test_velocity_along_the_view_is_read_from_the_growing_mask(dataset):

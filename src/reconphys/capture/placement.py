@@ -258,21 +258,20 @@ def _velocity_fit(
     fall = torch.zeros(len(used), 3, dtype=torch.float64)
     fall[:, 2] = -0.5 * GRAVITY_MAGNITUDE * times**2
 
-    def residual(velocity: Tensor) -> Tensor:
-        centres = points.mean(0) + times[:, None] * velocity + fall  # [F, 3]
-        uv, depth = project(centres, camera)
-        size = radius * (growth - depth0[0] / depth)
-        return torch.cat([(uv + offset - observed).reshape(-1), size, velocity / prior_speed])
+    def residual(velocity: Tensor) -> tuple[Tensor, Tensor]:  # [2F + F + 3], its Jacobian
+        return velocity_residual(
+            velocity, points.mean(0), times, fall[:, 2], camera, observed - offset,
+            growth, radius, float(depth0[0]), prior_speed,
+        )  # fmt: skip
 
     velocity = torch.zeros(3, dtype=torch.float64)
     for _ in range(10):  # Gauss–Newton (the model is nearly linear in v over a few frames)
-        J = torch.autograd.functional.jacobian(residual, velocity)
-        r = residual(velocity)
+        r, J = residual(velocity)
         step = torch.linalg.lstsq(J, -r[:, None]).solution[:, 0]
         velocity = velocity + step
         if float(step.norm()) < 1e-6:
             break
-    J, r = torch.autograd.functional.jacobian(residual, velocity), residual(velocity)
+    r, J = residual(velocity)
     pixels = r[:-3]  # the centroid's and the size's residuals (the last 3: the prior)
     noise = max(float((pixels**2).sum()) / max(len(pixels) - 3, 1), noise_px**2)
     covariance = noise * torch.linalg.inv(J.T @ J)  # [3, 3] world axes, (m/s)²
@@ -294,6 +293,45 @@ def _velocity_fit(
     rotation = camera.world_to_cam[:3, :3].double()
     across = (rotation @ covariance @ rotation.T).diagonal().sqrt()
     return velocity.float(), across.float()
+
+
+def velocity_residual(
+    velocity: Tensor,  # [3] m/s, world frame, float64
+    centre: Tensor,  # [3] the object's centre at frame 0, world frame
+    times: Tensor,  # [F] s after frame 0
+    drop: Tensor,  # [F] m: the fall's z offset at those times (−g t² / 2)
+    camera: CameraSpec,
+    target: Tensor,  # [F, 2] px: where the projected centre should be
+    growth: Tensor,  # [F] the masks' apparent size relative to frame 0
+    radius: float,  # px: weighs the size residual
+    depth0: float,  # m: the centre's depth at frame 0
+    prior_speed: float,  # m/s
+) -> tuple[Tensor, Tensor]:  # [3F + 3] residual, [3F + 3, 3] its Jacobian in the velocity
+    """:func:`linear_velocity_fit`'s residual — the projected centre against ``target`` [2F,
+    px], the apparent size radius · (growth − depth0 / depth) [F, px] and the prior v /
+    prior_speed [3] — with its Jacobian, written out (a test checks it against autograd): the
+    centre at t is c + t v + (0, 0, drop), in the camera p = R (·) + T, so ∂p/∂v = t R and
+    ∂(f p_xy / p_z)/∂v = f (t R_xy − (p_xy / p_z) t R_z) / p_z, ∂(−depth0 / p_z)/∂v =
+    depth0 t R_z / p_z²."""
+    w2c = camera.world_to_cam.double()
+    rotation, translation = w2c[:3, :3], w2c[:3, 3]
+    K = camera.K.double()
+    focal = torch.stack([K[0, 0], K[1, 1]])  # [2]
+    principal = torch.stack([K[0, 2], K[1, 2]])
+    centres = centre + times[:, None] * velocity  # [F, 3]
+    centres = centres + torch.stack([torch.zeros_like(drop), torch.zeros_like(drop), drop], -1)
+    cam = centres @ rotation.T + translation  # [F, 3]
+    depth = cam[:, 2].clamp_min(1e-6)
+    ratio = cam[:, :2] / depth[:, None]  # [F, 2]
+    uv = ratio * focal + principal
+    size = radius * (growth - depth0 / depth)
+    r = torch.cat([(uv - target).reshape(-1), size, velocity / prior_speed])
+    d_cam = times[:, None, None] * rotation  # [F, 3, 3]: ∂cam_i / ∂v_j
+    d_ratio = (d_cam[:, :2] - ratio[..., None] * d_cam[:, 2:3]) / depth[:, None, None]
+    d_uv = (focal[:, None] * d_ratio).reshape(-1, 3)  # [2F, 3]
+    d_size = radius * depth0 * d_cam[:, 2] / depth[:, None] ** 2  # [F, 3]
+    d_prior = torch.eye(3, dtype=torch.float64) / prior_speed
+    return r, torch.cat([d_uv, d_size, d_prior])
 
 
 def estimate_ground_height(

@@ -10,8 +10,8 @@ frame's shift against frame 0 is read from the background and taken out:
   translation is fitted by Gauss–Newton (Lucas–Kanade), 2× area-averaged first, then at full
   size, with a Cauchy weight (:data:`RESIDUAL_SCALE`) under which pixels that do not match —
   the falling object, its shadow — count little; consecutive frames first (shifts of a pixel
-  or two), their chain the start of the fit against frame 0 (a shift of many pixels, or a
-  repeating floor pattern, would otherwise be caught a period away);
+  or two; 2× averaged only), their chain the start of the fit against frame 0 (a shift of many
+  pixels, or a repeating floor pattern, would otherwise be caught a period away);
 - a tile whose structure tensor's smaller eigenvalue per pixel stays below
   :data:`TEXTURE_MIN` (a plain wall, a muted floor at 96 px: too little texture to say where it
   moved) is not used; the frame's shift is the median of the others' (the object covers one or
@@ -166,10 +166,10 @@ def _fit_tiles(
             ).reshape(n, count, th, tw)
             residual = back - ref_tiles
             gx, gy = _gradients(back)  # within each tile (its outer ring: 0)
-            weight = 1 / (1 + (residual / RESIDUAL_SCALE) ** 2)
-            a11, a12 = (weight * gx * gx).sum((2, 3)), (weight * gx * gy).sum((2, 3))
-            a22 = (weight * gy * gy).sum((2, 3))
-            b1, b2 = -(weight * gx * residual).sum((2, 3)), -(weight * gy * residual).sum((2, 3))
+            weight = torch.reciprocal(1 + (residual * (1 / RESIDUAL_SCALE)).square())
+            wgx, wgy = weight * gx, weight * gy
+            a11, a12, a22 = (wgx * gx).sum((2, 3)), (wgx * gy).sum((2, 3)), (wgy * gy).sum((2, 3))
+            b1, b2 = -(wgx * residual).sum((2, 3)), -(wgy * residual).sum((2, 3))
             det = a11 * a22 - a12**2
             safe = det.clamp_min(1e-14)
             step = torch.stack([(a22 * b1 - a12 * b2) / safe, (a11 * b2 - a12 * b1) / safe], -1)
@@ -201,7 +201,9 @@ def read_shake(frames: Tensor, grid: int = TILE_GRID) -> Shake:
     grey = frames.float().mean(-1)  # [T, H, W]
     count = grid * grid
     zero = torch.zeros(frames.shape[0] - 1, count, 2)
-    steps, _ = _fit_tiles(grey[1:], grey[:-1], zero, grid)  # each against the frame before
+    # each against the frame before, 2× averaged only: their chain is just the start of the
+    # fit against frame 0, which reads both sizes
+    steps, _ = _fit_tiles(grey[1:], grey[:-1], zero, grid, scales=(2,))
     chained = torch.cat([torch.zeros(1, count, 2), steps.cumsum(0)])
     shifts, texture = _fit_tiles(grey[1:], grey[:1], chained[1:], grid)
     textured = texture.median(0).values > TEXTURE_MIN  # [K], judged over the clip
