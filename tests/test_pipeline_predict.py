@@ -446,6 +446,41 @@ def test_velocity_along_the_view_is_read_from_the_growing_mask(dataset):
     assert float(estimate.norm()) < 0.1, estimate
 
 
+def test_a_segmenters_growing_rim_is_not_read_as_motion_towards_the_camera(dataset):
+    """A mask segmenter's masks of an object released from rest that gain a rim as it falls
+    (a pixel from frame 1, two from frame 4: the area 11 % larger): weighed as exact masks'
+    the growth reads as ~1 m/s towards the camera; with the segmenter's weight
+    (placement.SEGMENTED_SIZE_WEIGHT) the rest test holds. A true motion towards the camera
+    still shows in the size at that weight."""
+    from scipy import ndimage
+
+    from reconphys.capture.placement import SEGMENTED_SIZE_WEIGHT
+    from reconphys.data.dataset import DropDataset
+
+    gaussians = DropDataset(dataset).asset(0).gaussians
+    masks, camera = _rendered_fall(gaussians, torch.zeros(3), size=96, frames=8)
+    rims = [0, 1, 1, 1, 2, 2, 2, 2]
+    grown = torch.stack(
+        [
+            torch.from_numpy(ndimage.binary_dilation(m > 0.5, iterations=k) if k else m > 0.5)
+            for m, k in zip(masks.numpy(), rims, strict=True)
+        ]
+    ).float()
+    assert float(grown[-1].sum() / grown[0].sum()) > 1.1
+    exact = linear_velocity_fit(gaussians.means, grown, camera, 0.03, fall=8)[0]
+    assert float(exact.norm()) > 0.5  # read as a toss
+    weighed = linear_velocity_fit(
+        gaussians.means, grown, camera, 0.03, fall=8, size_weight=SEGMENTED_SIZE_WEIGHT
+    )[0]
+    assert torch.equal(weighed, torch.zeros(3))
+    towards = torch.tensor([1.0, 0.0, 0.0])  # +x: towards view 0's camera
+    masks, camera = _rendered_fall(gaussians, towards, size=128, frames=5)
+    estimate = linear_velocity_fit(
+        gaussians.means, masks, camera, 0.03, frames=5, size_weight=SEGMENTED_SIZE_WEIGHT
+    )[0]
+    assert 0.6 < float(estimate[0]) < 1.4, estimate
+
+
 def test_a_release_from_rest_comes_back_at_rest_and_a_slow_toss_does_not(dataset, monkeypatch):
     """The rest test (placement.REST_CHI2): a drop from rest is read as exactly at rest, where
     the fit alone reads a few cm/s of mask noise as motion; a toss of 0.3 m/s sideways is

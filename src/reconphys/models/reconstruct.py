@@ -22,12 +22,13 @@ from ..capture import Observation
 from ..capture.calibrate import (
     CAMERA_CONVENTION,
     MAX_READ_SIZE_M,
+    SEGMENTER_FALL_FIT_PX,
     fall_frames,
     mask_track,
     object_depth,
     rest_depth,
 )
-from ..capture.placement import linear_velocity_fit
+from ..capture.placement import SEGMENTED_SIZE_WEIGHT, linear_velocity_fit
 from ..errors import InputError
 from ..geometry import rigid_velocity
 from .model_input import frame_crop, predictor_frames, virtual_intrinsics
@@ -41,12 +42,14 @@ def initial_velocity(gaussians: Gaussians, observation: Observation) -> Tensor: 
 def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tuple[Tensor, Tensor]:
     """(velocity [3] m/s world frame, its standard error [3] m/s along the camera's x right,
     y down and viewing axes) from the masks' free fall (capture.placement.linear_velocity_fit)."""
+    segmented = observation.fall_fit_px >= SEGMENTER_FALL_FIT_PX  # the segmenter's masks
     return linear_velocity_fit(
         gaussians.means,
         observation.masks,
         observation.camera,
         observation.frame_dt,
         fall=observed_fall_frames(observation),
+        size_weight=SEGMENTED_SIZE_WEIGHT if segmented else 1.0,
     )
 
 
