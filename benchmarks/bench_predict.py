@@ -68,7 +68,12 @@ def best_timings(repeats: int, **kwargs) -> dict[str, float]:
 
 def first_test_sample(data: str) -> str:
     manifest = json.loads((Path(data) / "manifest.json").read_text())
-    return next(s["id"] for s in manifest["samples"] if s["split"] == "test")
+    tests = [s["id"] for s in manifest["samples"] if s["split"] == "test"]
+    if not tests:
+        raise SystemExit(
+            f"error: {data} has no test sample (make-data --test-objects 1, or --sample ID)"
+        )
+    return tests[0]
 
 
 def export_video(data: str, sample: str, out: Path) -> Path:
