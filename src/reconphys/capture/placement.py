@@ -253,7 +253,7 @@ def _velocity_fit(
     prior_speed: float,  # m/s
     noise_px: float,  # the pixel noise floor of the standard error
     rest_chi2: float,  # the test for a release from rest (0: none)
-    size_weight: float = 1.0,  # the size term's weight
+    size_weight: float,  # the size term's weight
 ) -> tuple[Tensor, Tensor]:  # [3] m/s (world), [3] m/s standard error in the camera's axes
     """:func:`linear_velocity_fit` over frames 0..frames−1."""
     used = [t for t in range(min(frames, masks.shape[0])) if float(masks[t].sum()) > 0]
