@@ -323,6 +323,18 @@ def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
     assert result.exit_code == 2 and "'auto'" in result.output and not out.exists()
     result, out = _predict([held, "--start", "0.3", "--end", "0.1"], tmp_path)
     assert result.exit_code == 2 and "--end" in result.output and not out.exists()
+    # a cut shorter than the model reads is refused for its length, before its masks and its
+    # camera are read (no mask folder, no camera file: the segmenter would run and the camera's
+    # estimate refuse the short fall with the wrong advice)
+    with pytest.raises(InputError, match=r"5 frames at 0.03 s .*reads 20 \(0.57 s.*later --end"):
+        load_observation(held, start=0.3, end=0.42, segment=_no_segmenter, min_frames=20)
+    assert load_observation(held, camera=bundle / "camera.json", start=0.3, min_frames=20)
+    result, out = _predict([held, "--start", "0.3", "--end", "0.42"], tmp_path)
+    assert result.exit_code == 2 and "5 frames at 0.03 s" in result.output and not out.exists()
+
+
+def _no_segmenter(frames):
+    raise AssertionError("the segmenter ran on a recording too short to read")
 
 
 def test_transparent_gif_gives_the_masks(bundle, tmp_path):

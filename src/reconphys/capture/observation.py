@@ -151,6 +151,16 @@ def _plausible(masks: Tensor) -> bool:
     return True
 
 
+def too_short(count: int, frame_dt: float, needed: int) -> str:
+    """The refusal of a recording with ``count`` frames at ``frame_dt`` s where ``needed`` are
+    read."""
+    return (
+        f"{count} frames at {frame_dt} s after resampling; the model reads {needed} "
+        f"({(needed - 1) * frame_dt:.2f} s of video from the release): give a longer "
+        "recording, or a later --end"
+    )
+
+
 def load_observation(
     input: str | os.PathLike,
     *,
@@ -166,8 +176,11 @@ def load_observation(
     end: float | None = None,  # seconds into the recording: frames after it dropped (None:
     # CLIP_FRAMES frames from the start, as long as the data's clips; the rest is not decoded)
     segment: Callable[[Tensor], Tensor] | None = None,  # frames [T, H, W, 3] → masks [T, H, W]
+    min_frames: int = 0,  # fewer frames after resampling: refused before masks and camera
 ) -> Observation:
-    """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input."""
+    """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input;
+    a recording with fewer than ``min_frames`` frames at ``frame_dt`` (from ``start`` to
+    ``end``) is refused as too short (:func:`too_short`) before its masks are read."""
     auto = start == AUTO_START
     if auto:
         start = 0.0
@@ -210,6 +223,8 @@ def load_observation(
         before, after, weight = resample_between(
             raw.shape[0], rate, frame_dt, start, read_end, stamps
         )
+    if not auto and len(before) < min_frames:
+        raise InputError(too_short(len(before), frame_dt, min_frames), source=str(path))
     between = weight > 0
     # the recorded frames used: each wanted one's, or the pairs it lies between
     picks = np.unique(np.concatenate([before, after])) if between.any() else before
@@ -299,7 +314,7 @@ def load_observation(
         return load_observation(
             path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
             touch=touch, fps=fps, frame_dt=frame_dt, start=release or 0.0, end=end,
-            segment=segment,
+            segment=segment, min_frames=min_frames,
         )  # fmt: skip
     check_release(chosen, str(path), start, frame_dt)
     estimate, intrinsics = None, None

@@ -37,6 +37,7 @@ from ..assets.gaussians import Gaussians
 from ..capture import Observation
 from ..capture.calibrate import check_touch
 from ..capture.masks import FIRST_FRAMES_AREA_CHANGE, first_frames_area_change
+from ..capture.observation import too_short
 from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
 from ..errors import InputError
 from ..models.gaussian_shipped import (
@@ -250,6 +251,7 @@ def predict(
         view=predictor.view if view is None else view,
         start=start,
         end=end,
+        min_frames=predictor.num_frames,
     )
     timings["decode"] = time.perf_counter() - started
     if model is None:  # the network for this recording's look (models/shipped.py)
@@ -262,9 +264,7 @@ def predict(
         details["model_choice"] = why
     if observation.num_frames < predictor.num_frames:
         raise InputError(
-            f"{observation.num_frames} frames at {observation.frame_dt} s after resampling; the "
-            f"model reads {predictor.num_frames} ({predictor.num_frames * observation.frame_dt:.2f}"
-            " s of video)",
+            too_short(observation.num_frames, observation.frame_dt, predictor.num_frames),
             source=observation.source,
         )
     details["input"] = {

@@ -93,6 +93,7 @@ def load_input(
     view: int = 0,  # dataset input: the view
     start: float | str = 0.0,  # seconds into a recording: its release (frame 0), or "auto"
     end: float | None = None,  # seconds into a recording: the frames after it are dropped
+    min_frames: int = 0,  # a recording with fewer (after resampling) is refused at once
 ) -> tuple[Observation, SampleTruth | None]:
     """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
     and the sample's truth for a dataset input (None otherwise). Raises InputError."""
@@ -119,6 +120,7 @@ def load_input(
         start=start,
         end=end,
         segment=segment_frames,
+        min_frames=min_frames,
     )
     return observation, None
 
