@@ -4,8 +4,11 @@ For every sample of a split: frame 0 of view 0 (the object on black: the plain l
 ``predict`` masks it, the realistic look by its stored true masks) → each predictor's Gaussians
 on the object's pixels (world frame, the true camera) → rendered into view 0 (the input) and
 views 1–3 (unseen) → PSNR against the stored frames over the truth's foreground (the object's
-pixels, as ``evaluate``); Chamfer distance (squared, m², as ``evaluate``) between the predicted
-and the true Gaussian centres at frame 0. Rows:
+pixels, as ``evaluate``); beside it two scores that count Gaussians spilled past the object's
+outline, which that one does not: PSNR over the whole image (the object on black) in the unseen
+views, and their silhouette IoU (alpha > 0.5 against the truth's pixels); Chamfer distance
+(squared, m², as ``evaluate``) between the predicted and the true Gaussian centres at frame 0.
+Rows:
 
 - each ``--model`` (a whole-frame model, or a crop model with the object's distance read from
   the video's free fall as ``predict`` reads it, ``object_distance``, its Gaussians on the
@@ -35,7 +38,7 @@ from reconphys.capture.masks import subtract_background
 from reconphys.capture.observation import stored_observation
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
-from reconphys.eval.metrics import chamfer_distance, psnr
+from reconphys.eval.metrics import chamfer_distance, foreground_mask, psnr
 from reconphys.models.gaussian_predictor import billboard_gaussians
 from reconphys.models.gaussian_shipped import load_gaussian_predictor
 from reconphys.models.reconstruct import object_distance, predicted_gaussians
@@ -73,9 +76,18 @@ def main() -> None:
 
     def add(name: str, gaussians, cameras, targets, truth_means) -> str:
         with torch.no_grad():
-            rgb = render(gaussians, cameras).rgb  # [V, H, W, 3]
+            out = render(gaussians, cameras)
+        rgb = out.rgb  # [V, H, W, 3]
         scores = psnr(rgb, targets)
-        row = rows.setdefault(name, {"input": [], "novel": [], "all": [], "cd": [], "n": []})
+        truth = foreground_mask(targets)[1:]  # the unseen views' object pixels
+        whole = psnr(rgb[1:], targets[1:], torch.ones_like(truth))
+        drawn = out.alpha.reshape(targets.shape[:-1])[1:] > 0.5
+        iou = (drawn & truth).sum((-1, -2)) / (drawn | truth).sum((-1, -2)).clamp_min(1)
+        row = rows.setdefault(
+            name, {k: [] for k in ("input", "novel", "all", "cd", "n", "whole", "iou")}
+        )
+        row["whole"].append(float(whole.nanmean()))
+        row["iou"].append(float(iou.mean()))
         row["input"].append(float(scores[0]))
         row["novel"].append(float(scores[1:].nanmean()))
         row["all"].append(float(scores.nanmean()))
@@ -148,14 +160,16 @@ def main() -> None:
         f"\n{count} {args.split} samples of {args.data} ({'realistic' if realistic else 'plain'} "
         f"look, {size} px), {time.perf_counter() - started:.0f} s. PSNR of frame 0 over the "
         "truth's foreground: all 4 views / input view 0 / unseen views 1–3; Chamfer (m²); "
-        "Gaussians kept"
+        "Gaussians kept; the unseen views' PSNR over the whole image and silhouette IoU (spill "
+        "counted)"
     )
     for name, values in rows.items():
         print(
             f"  {name:34s} {statistics.fmean(values['all']):6.2f} dB  "
             f"{statistics.fmean(values['input']):6.2f} dB  "
             f"{statistics.fmean(values['novel']):6.2f} dB  "
-            f"{statistics.fmean(values['cd']):.3e}  {statistics.fmean(values['n']):7.0f}"
+            f"{statistics.fmean(values['cd']):.3e}  {statistics.fmean(values['n']):7.0f}  "
+            f"{statistics.fmean(values['whole']):6.2f} dB  {statistics.fmean(values['iou']):.3f}"
         )
 
 
