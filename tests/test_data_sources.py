@@ -164,6 +164,7 @@ def test_stretch_leaves_older_datasets_fingerprints_alone():
         "vivid_share",
         "contrast_share",
         "hand_share",
+        "exposure_range_s",
     ):
         values.pop(name)
     text = json.dumps(values, sort_keys=True)

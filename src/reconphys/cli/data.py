@@ -43,6 +43,7 @@ SETTINGS_OPTIONS = {
     "vivid_share": "vivid_share",
     "contrast_share": "contrast_share",
     "hand_share": "hand_share",
+    "exposure": "exposure_range_s",
 }
 
 
@@ -97,6 +98,12 @@ def make_data(
         "fingers and a forearm holding the object's top, withdrawn or kept still after the "
         "release; the masks are the object's visible pixels; default 0).",
     ),
+    exposure: float = typer.Option(
+        None,
+        help="Realistic look only: the longest the shutter stays open, seconds (each sample's "
+        "drawn uniformly from 0 to it, at most the frame interval; a phone indoors: 1/30 s): "
+        "the object blurred along its motion. Default 0: sharp frames.",
+    ),
     stretch: float = typer.Option(
         None,
         help="Stretch each mesh along a random axis by up to this factor (log-uniform from 1; "
@@ -135,6 +142,8 @@ def make_data(
     }
     if values.get("stretch_range") is not None:
         values["stretch_range"] = (1.0, float(values["stretch_range"]))
+    if values.get("exposure_range_s") is not None:
+        values["exposure_range_s"] = (0.0, float(values["exposure_range_s"]))
     if values.get("objaverse_uids"):
         values["objaverse_uids"] = str(values["objaverse_uids"])
     settings = make_settings(preset, config, **values)

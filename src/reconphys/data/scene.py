@@ -4,8 +4,9 @@ the cameras framed on its motion.
 A realistic sample draws, from its own random stream (so the physics of a seed is the same in
 both looks), the object's size, a scene (render/scene.py: ground, backdrop, light, noise), a
 camera (vertical field of view, elevation, azimuth, how much of the image the motion spans and
-where it sits) and the video's compression quality. The four views share intrinsics and distance
-and sit 90° apart around the centre of the motion, as in the plain look.
+where it sits), the video's compression quality and, where asked, the shutter's open time. The
+four views share intrinsics and distance and sit 90° apart around the centre of the motion, as
+in the plain look.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ SCENE_STREAM = 1  # the realistic look's random stream, beside the sample's own 
 VIVID_STREAM = 2  # whether and how a scene is vivid (settings.vivid_share): a stream of its own
 CONTRAST_STREAM = 3  # whether and how its floor is high-contrast (settings.contrast_share)
 HAND_STREAM = 4  # whether and how a hand lets the object go (settings.hand_share)
+EXPOSURE_STREAM = 5  # how long the shutter stays open (settings.exposure_range_s)
 
 
 @dataclass(frozen=True)
@@ -45,9 +47,15 @@ class SceneSpec:
     video_quality: float  # H.264 quality 0–10
     noise_seed: int
     hand: HandSpec | None = None  # a hand holding the object at frame 0 (render/hand.py)
+    exposure_s: float = 0.0  # the shutter open this long about each frame's time (0: sharp)
 
-    def to_dict(self) -> dict:  # JSON-ready, without the noise seed (nor a hand when none)
-        out = {k: v for k, v in asdict(self).items() if k not in ("noise_seed", "hand")}
+    def to_dict(self) -> dict:  # JSON-ready, without the noise seed (nor a hand when none, nor
+        # a sharp shutter: the looks stored before the shutter existed read the same)
+        out = {
+            k: v for k, v in asdict(self).items() if k not in ("noise_seed", "hand", "exposure_s")
+        }
+        if self.exposure_s:
+            out["exposure_s"] = self.exposure_s
         return out if self.hand is None else {**out, "hand": self.hand.to_dict()}
 
 
@@ -70,6 +78,10 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         held = np.random.default_rng([seed, HAND_STREAM])
         if held.random() < settings.hand_share:
             hand = draw_hand(held)
+    exposure = 0.0
+    if max(settings.exposure_range_s) > 0:
+        shutter = np.random.default_rng([seed, EXPOSURE_STREAM])
+        exposure = float(shutter.uniform(*settings.exposure_range_s))
     return SceneSpec(
         size=size,
         look=look,
@@ -81,6 +93,7 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         video_quality=float(rng.uniform(*settings.video_quality_range)),
         noise_seed=int(rng.integers(0, 2**31 - 1)),
         hand=hand,
+        exposure_s=exposure,
     )
 
 

@@ -32,6 +32,7 @@ SCENE_FIELDS = (
     "vivid_share",
     "contrast_share",
     "hand_share",
+    "exposure_range_s",
 )
 
 
@@ -99,6 +100,11 @@ class DataSettings:
     # forearm holding the object's top at frame 0, withdrawn or kept still after), from a stream
     # of its own; the stored masks are the object's visible pixels
     hand_share: float = 0.0
+    # How long each realistic sample's shutter stays open, seconds, drawn uniformly from this
+    # range from a stream of its own (data/scene.py): the object blurred along its motion over
+    # that time, centred on the frame's time (data/generate.py motion_blurred). A phone's video
+    # indoors keeps it open up to the whole frame (1/30 s); at (0, 0) every frame is sharp
+    exposure_range_s: tuple[float, float] = (0.0, 0.0)
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -126,6 +132,8 @@ class DataSettings:
         for name in ("vivid_share", "contrast_share", "hand_share"):  # nor before those
             if self.scene != "plain" and not getattr(self, name):
                 values.pop(name)
+        if self.scene != "plain" and not max(self.exposure_range_s):  # nor the shutter's
+            values.pop("exposure_range_s")
         text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -209,6 +217,7 @@ class DataSettings:
             "framing_range": (0.05, 1.0),
             "noise_range": (0.0, 0.5),
             "video_quality_range": (0.0, 10.0),
+            "exposure_range_s": (0.0, self.frame_dt),
         }.items():
             low, high = getattr(self, name)
             if not (lowest <= low <= high <= highest):
