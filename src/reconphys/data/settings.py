@@ -217,13 +217,19 @@ class DataSettings:
             "framing_range": (0.05, 1.0),
             "noise_range": (0.0, 0.5),
             "video_quality_range": (0.0, 10.0),
-            "exposure_range_s": (0.0, self.frame_dt),
         }.items():
             low, high = getattr(self, name)
             if not (lowest <= low <= high <= highest):
                 raise InputError(
                     f"[{low}, {high}] must satisfy {lowest} ≤ low ≤ high ≤ {highest}", field=name
                 )
+        low, high = self.exposure_range_s
+        if not (0 <= low <= high <= self.frame_dt):
+            raise InputError(
+                f"[{low:g}, {high:g}] s must satisfy 0 ≤ low ≤ high ≤ the frame interval "
+                f"({self.frame_dt:g} s): a shutter opens at most once a frame",
+                field="--exposure (exposure_range_s)",
+            )
         for name in ("vivid_share", "contrast_share", "hand_share"):
             share = getattr(self, name)
             if not (isinstance(share, (int, float)) and 0 <= share <= 1):
