@@ -70,6 +70,8 @@ def test_an_open_shutter_blurs_the_moving_object_and_changes_nothing_else(tmp_pa
         assert replace(b, exposure_s=0.0) == a
     with pytest.raises(InputError, match=r"--exposure .*frame interval"):
         replace(sharp, exposure_range_s=(0.0, 2 * DT)).validated()
+    with pytest.raises(InputError, match=r"--exposure.*realistic look only"):  # not on black
+        replace(blurred, scene="plain").validated()
     make_dataset(sharp, tmp_path / "sharp", workers=1, device="cpu")
     make_dataset(blurred, tmp_path / "blurred", workers=1, device="cpu")
     before, after = DropDataset(tmp_path / "sharp"), DropDataset(tmp_path / "blurred")

@@ -223,6 +223,19 @@ class DataSettings:
                 raise InputError(
                     f"[{low}, {high}] must satisfy {lowest} ≤ low ≤ high ≤ {highest}", field=name
                 )
+        if self.scene == "plain":  # the realistic look's draws, asked of the plain one
+            for flag, value in (
+                ("--vivid-share", self.vivid_share),
+                ("--contrast-share", self.contrast_share),
+                ("--hand-share", self.hand_share),
+                ("--exposure", max(self.exposure_range_s)),
+            ):
+                if value:
+                    raise InputError(
+                        f"{value:g} asked of the plain look (the object on black): it applies "
+                        "to the realistic look only; add --scene realistic",
+                        field=flag,
+                    )
         low, high = self.exposure_range_s
         if not (0 <= low <= high <= self.frame_dt):
             raise InputError(
