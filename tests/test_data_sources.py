@@ -165,6 +165,7 @@ def test_stretch_leaves_older_datasets_fingerprints_alone():
         "contrast_share",
         "hand_share",
         "exposure_range_s",
+        "readout_range_s",
     ):
         values.pop(name)
     text = json.dumps(values, sort_keys=True)

@@ -44,6 +44,7 @@ SETTINGS_OPTIONS = {
     "contrast_share": "contrast_share",
     "hand_share": "hand_share",
     "exposure": "exposure_range_s",
+    "readout": "readout_range_s",
 }
 
 
@@ -104,6 +105,12 @@ def make_data(
         "drawn uniformly from 0 to it, at most the frame interval; a phone indoors: 1/30 s): "
         "the object blurred along its motion. Default 0: sharp frames.",
     ),
+    readout: float = typer.Option(
+        None,
+        help="Realistic look only: the longest the sensor takes to read its rows, top to "
+        "bottom, seconds (each sample's drawn uniformly from 0 to it, at most the frame "
+        "interval; a phone's rolling shutter: 0.01-0.03). Default 0: every row at once.",
+    ),
     stretch: float = typer.Option(
         None,
         help="Stretch each mesh along a random axis by up to this factor (log-uniform from 1; "
@@ -142,8 +149,9 @@ def make_data(
     }
     if values.get("stretch_range") is not None:
         values["stretch_range"] = (1.0, float(values["stretch_range"]))
-    if values.get("exposure_range_s") is not None:
-        values["exposure_range_s"] = (0.0, float(values["exposure_range_s"]))
+    for name in ("exposure_range_s", "readout_range_s"):
+        if values.get(name) is not None:
+            values[name] = (0.0, float(values[name]))
     if values.get("objaverse_uids"):
         values["objaverse_uids"] = str(values["objaverse_uids"])
     settings = make_settings(preset, config, **values)

@@ -34,6 +34,10 @@ FRAMES_PER_RENDER_CALL = 8  # bounds renderer memory at large resolutions
 # Renders averaged per frame while the shutter is open (settings.exposure_range_s): the blur of
 # a 128-px drop at landing speed spans ~4–8 px at 1/60–1/30 s, so ~1 px between renders
 SHUTTER_SAMPLES = 8
+# A rolling shutter (settings.readout_range_s) reads the rows in this many bands, each at its
+# own time (≤ 2 ms apart at 1/30 s), each band's exposure in this many renders
+READOUT_BANDS = 16
+READOUT_SHUTTER_SAMPLES = 4
 
 
 @dataclass
@@ -101,25 +105,22 @@ def render_object_views(
     return torch.cat(rgb).transpose(0, 1), torch.cat(alpha).transpose(0, 1)
 
 
-def shutter_anchors(
+def carried_anchors(
     anchors: torch.Tensor,  # [T, N_A, 3] metres, at the frames' times
     velocities: torch.Tensor,  # [T, N_A, 3] m/s
-    exposure: float,  # seconds the shutter is open, centred on each frame's time
+    offsets: list[float],  # S times, seconds from each frame's time, each within ± frame_dt
     frame_dt: float,  # seconds between frames
     ground_height: float = 0.0,  # metres
-    samples: int = SHUTTER_SAMPLES,
 ) -> torch.Tensor:  # [S, T, N_A, 3] metres
-    """Where the anchors are at ``samples`` times spread evenly over each frame's exposure
-    (midpoints of equal parts of [t − e/2, t + e/2]): carried from the last frame at or before
-    that time by its velocity under gravity (exact in free fall; within the contact's few mm
-    during the half frame at most between the two), never below the ground. Before frame 0 the
-    object is held where it is let go."""
-    if not 0 < exposure <= frame_dt:
-        raise ValueError(f"exposure: expected (0, frame_dt = {frame_dt}] s, got {exposure}")
+    """Where the anchors are ``offset`` seconds from each frame's time: carried from the last
+    frame at or before that time by its velocity under gravity (exact in free fall; within the
+    contact's few mm during the frame at most between the two), never below the ground. Before
+    frame 0 the object is held where it is let go."""
+    if any(abs(offset) > frame_dt for offset in offsets):
+        raise ValueError(f"offsets: expected within ± frame_dt = {frame_dt} s, got {offsets}")
     gravity = torch.tensor(GRAVITY, dtype=anchors.dtype, device=anchors.device)
-    offsets = (torch.arange(samples, dtype=torch.float64) + 0.5) / samples * exposure
     out = []
-    for offset in (offsets - exposure / 2).tolist():  # seconds from each frame's time
+    for offset in offsets:
         if offset >= 0:
             start, velocity, after = anchors, velocities, offset
         else:  # from the frame before (frame 0: held still until the release)
@@ -134,6 +135,36 @@ def shutter_anchors(
     return torch.stack(out)
 
 
+def shutter_anchors(
+    anchors: torch.Tensor,  # [T, N_A, 3] metres, at the frames' times
+    velocities: torch.Tensor,  # [T, N_A, 3] m/s
+    exposure: float,  # seconds the shutter is open, centred on each frame's time (+ shift)
+    frame_dt: float,  # seconds between frames
+    ground_height: float = 0.0,  # metres
+    samples: int = SHUTTER_SAMPLES,
+    shift: float = 0.0,  # seconds: the exposure's centre from the frame's time (a row's readout)
+) -> torch.Tensor:  # [S, T, N_A, 3] metres
+    """Where the anchors are at ``samples`` times spread evenly over each frame's exposure (the
+    midpoints of equal parts of [t + shift − e/2, t + shift + e/2]; :func:`carried_anchors`)."""
+    if not 0 < exposure <= frame_dt:
+        raise ValueError(f"exposure: expected (0, frame_dt = {frame_dt}] s, got {exposure}")
+    parts = (torch.arange(samples, dtype=torch.float64) + 0.5) / samples * exposure
+    offsets = (shift + parts - exposure / 2).tolist()
+    return carried_anchors(anchors, velocities, offsets, frame_dt, ground_height)
+
+
+def _render_moments(
+    asset: Asset, moments: torch.Tensor, cameras: Cameras, look: SceneLook
+) -> tuple[torch.Tensor, torch.Tensor]:  # rgb [C, T, H, W, 3] on black, alpha [C, T, H, W]
+    """The object rendered at each of S moments [S, T, N_A, 3] and averaged: the colour on black
+    is premultiplied, so colour and coverage both average as they are."""
+    rgb = alpha = 0.0
+    for at in moments:
+        rgb_at, alpha_at = render_object_views(asset, at, cameras, look)
+        rgb, alpha = rgb + rgb_at / len(moments), alpha + alpha_at / len(moments)
+    return rgb, alpha
+
+
 def render_realistic(
     asset: Asset,
     anchors: torch.Tensor,  # [T, N_A, 3] metres
@@ -142,20 +173,36 @@ def render_realistic(
     velocities: torch.Tensor | None = None,  # [T, N_A, 3] m/s: needed with an open shutter
 ) -> tuple[Cameras, np.ndarray, np.ndarray, list[bytes]]:
     """The realistic look: cameras framed on the motion, the shaded object over the scene with
-    its shadow (blurred along its motion while the shutter is open: ``spec.exposure_s``), sensor
-    noise and H.264 compression. Returns the cameras, the decoded frames [V, T, H, W, 3] uint8,
-    the true masks [V, T, H, W] bool (the blurred alpha over ½) and the V mp4 files."""
+    its shadow (blurred along its motion while the shutter is open, ``spec.exposure_s``; its
+    rows read one after the other, ``spec.readout_s``), sensor noise and H.264 compression.
+    Returns the cameras, the decoded frames [V, T, H, W, 3] uint8, the true masks [V, T, H, W]
+    bool (the object's coverage over ½, as the sensor caught it) and the V mp4 files."""
     anchors_np = anchors.detach().cpu().double().numpy()
     cameras = framed_cameras(anchors_np, spec, settings.resolution)
-    if spec.exposure_s > 0:
-        if velocities is None:
-            raise ValueError("an open shutter (spec.exposure_s > 0) needs the velocities")
-        ground = asset.physics.ground_height
-        moments = shutter_anchors(anchors, velocities, spec.exposure_s, settings.frame_dt, ground)
-        rgb = alpha = 0.0
-        for at in moments:  # the colour on black is premultiplied: both average as they are
-            rgb_at, alpha_at = render_object_views(asset, at, cameras, spec.look)
-            rgb, alpha = rgb + rgb_at / len(moments), alpha + alpha_at / len(moments)
+    if (spec.exposure_s > 0 or spec.readout_s > 0) and velocities is None:
+        raise ValueError("an open shutter or a rolling readout needs the velocities")
+    ground, dt = asset.physics.ground_height, settings.frame_dt
+    if spec.readout_s > 0:  # a rolling shutter: each band of rows at its own time
+        height = settings.resolution
+        rgb = torch.zeros(4, anchors.shape[0], height, height, 3)
+        alpha = torch.zeros(4, anchors.shape[0], height, height)
+        for band in range(READOUT_BANDS):
+            rows = slice(band * height // READOUT_BANDS, (band + 1) * height // READOUT_BANDS)
+            shift = ((band + 0.5) / READOUT_BANDS - 0.5) * spec.readout_s
+            if spec.exposure_s > 0:
+                moments = shutter_anchors(
+                    anchors, velocities, spec.exposure_s, dt, ground, READOUT_SHUTTER_SAMPLES, shift
+                )
+            else:
+                moments = carried_anchors(anchors, velocities, [shift], dt, ground)
+            rgb_band, alpha_band = _render_moments(asset, moments, cameras, spec.look)
+            rgb[:, :, rows], alpha[:, :, rows] = (
+                rgb_band[:, :, rows].cpu(),
+                alpha_band[:, :, rows].cpu(),
+            )
+    elif spec.exposure_s > 0:
+        moments = shutter_anchors(anchors, velocities, spec.exposure_s, dt, ground)
+        rgb, alpha = _render_moments(asset, moments, cameras, spec.look)
     else:
         rgb, alpha = render_object_views(asset, anchors, cameras, spec.look)
     background = scene_background(cameras, spec.look)

@@ -4,9 +4,9 @@ the cameras framed on its motion.
 A realistic sample draws, from its own random stream (so the physics of a seed is the same in
 both looks), the object's size, a scene (render/scene.py: ground, backdrop, light, noise), a
 camera (vertical field of view, elevation, azimuth, how much of the image the motion spans and
-where it sits), the video's compression quality and, where asked, the shutter's open time. The
-four views share intrinsics and distance and sit 90° apart around the centre of the motion, as
-in the plain look.
+where it sits), the video's compression quality and, where asked, the shutter's open time and
+the rows' readout time. The four views share intrinsics and distance and sit 90° apart around
+the centre of the motion, as in the plain look.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ VIVID_STREAM = 2  # whether and how a scene is vivid (settings.vivid_share): a s
 CONTRAST_STREAM = 3  # whether and how its floor is high-contrast (settings.contrast_share)
 HAND_STREAM = 4  # whether and how a hand lets the object go (settings.hand_share)
 EXPOSURE_STREAM = 5  # how long the shutter stays open (settings.exposure_range_s)
+READOUT_STREAM = 6  # how long the rows take to read (settings.readout_range_s)
 
 
 @dataclass(frozen=True)
@@ -48,14 +49,15 @@ class SceneSpec:
     noise_seed: int
     hand: HandSpec | None = None  # a hand holding the object at frame 0 (render/hand.py)
     exposure_s: float = 0.0  # the shutter open this long about each frame's time (0: sharp)
+    readout_s: float = 0.0  # the rows read top to bottom over this long (0: all at once)
 
     def to_dict(self) -> dict:  # JSON-ready, without the noise seed (nor a hand when none, nor
         # a sharp shutter: the looks stored before the shutter existed read the same)
-        out = {
-            k: v for k, v in asdict(self).items() if k not in ("noise_seed", "hand", "exposure_s")
-        }
-        if self.exposure_s:
-            out["exposure_s"] = self.exposure_s
+        skipped = ("noise_seed", "hand", "exposure_s", "readout_s")
+        out = {k: v for k, v in asdict(self).items() if k not in skipped}
+        for name in ("exposure_s", "readout_s"):
+            if getattr(self, name):
+                out[name] = getattr(self, name)
         return out if self.hand is None else {**out, "hand": self.hand.to_dict()}
 
 
@@ -82,6 +84,10 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
     if max(settings.exposure_range_s) > 0:
         shutter = np.random.default_rng([seed, EXPOSURE_STREAM])
         exposure = float(shutter.uniform(*settings.exposure_range_s))
+    readout = 0.0
+    if max(settings.readout_range_s) > 0:
+        rows = np.random.default_rng([seed, READOUT_STREAM])
+        readout = float(rows.uniform(*settings.readout_range_s))
     return SceneSpec(
         size=size,
         look=look,
@@ -94,6 +100,7 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         noise_seed=int(rng.integers(0, 2**31 - 1)),
         hand=hand,
         exposure_s=exposure,
+        readout_s=readout,
     )
 
 

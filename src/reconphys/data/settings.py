@@ -33,6 +33,7 @@ SCENE_FIELDS = (
     "contrast_share",
     "hand_share",
     "exposure_range_s",
+    "readout_range_s",
 )
 
 
@@ -105,6 +106,11 @@ class DataSettings:
     # that time, centred on the frame's time (data/generate.py motion_blurred). A phone's video
     # indoors keeps it open up to the whole frame (1/30 s); at (0, 0) every frame is sharp
     exposure_range_s: tuple[float, float] = (0.0, 0.0)
+    # How long each realistic sample's sensor takes to read its rows, top to bottom, seconds,
+    # drawn uniformly from this range from a stream of its own (a phone's rolling shutter, 10–30
+    # ms; data/generate.py reads the rows in bands, each at its own time); at (0, 0) every row
+    # is read at once
+    readout_range_s: tuple[float, float] = (0.0, 0.0)
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -132,8 +138,9 @@ class DataSettings:
         for name in ("vivid_share", "contrast_share", "hand_share"):  # nor before those
             if self.scene != "plain" and not getattr(self, name):
                 values.pop(name)
-        if self.scene != "plain" and not max(self.exposure_range_s):  # nor the shutter's
-            values.pop("exposure_range_s")
+        for name in ("exposure_range_s", "readout_range_s"):  # nor the shutter's
+            if self.scene != "plain" and not max(getattr(self, name)):
+                values.pop(name)
         text = json.dumps(values, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -229,6 +236,7 @@ class DataSettings:
                 ("--contrast-share", self.contrast_share),
                 ("--hand-share", self.hand_share),
                 ("--exposure", max(self.exposure_range_s)),
+                ("--readout", max(self.readout_range_s)),
             ):
                 if value:
                     raise InputError(
@@ -236,13 +244,14 @@ class DataSettings:
                         "to the realistic look only; add --scene realistic",
                         field=flag,
                     )
-        low, high = self.exposure_range_s
-        if not (0 <= low <= high <= self.frame_dt):
-            raise InputError(
-                f"[{low:g}, {high:g}] s must satisfy 0 ≤ low ≤ high ≤ the frame interval "
-                f"({self.frame_dt:g} s): a shutter opens at most once a frame",
-                field="--exposure (exposure_range_s)",
-            )
+        for flag, name in (("--exposure", "exposure_range_s"), ("--readout", "readout_range_s")):
+            low, high = getattr(self, name)
+            if not (0 <= low <= high <= self.frame_dt):
+                raise InputError(
+                    f"[{low:g}, {high:g}] s must satisfy 0 ≤ low ≤ high ≤ the frame interval "
+                    f"({self.frame_dt:g} s): a sensor exposes and reads once a frame",
+                    field=f"{flag} ({name})",
+                )
         for name in ("vivid_share", "contrast_share", "hand_share"):
             share = getattr(self, name)
             if not (isinstance(share, (int, float)) and 0 <= share <= 1):
