@@ -23,6 +23,17 @@ def ballistic(x0: torch.Tensor, v0: torch.Tensor, t: float) -> tuple[torch.Tenso
     return x0 + v0 * t + 0.5 * g * t**2, v0 + g * t
 
 
+def still_drops(samples: int, resolution: int):
+    """Realistic drops from rest of one object, without sensor noise and at the finest
+    compression: two such datasets' frames differ by what the test changes alone."""
+    return make_settings(
+        scene="realistic", objects=1, test_objects=0, samples_per_object=samples,
+        resolution=resolution, num_gaussians=300, num_anchors=64, toss_fraction=0.0,
+        max_vertical_speed=0.0, max_horizontal_speed=0.0, noise_range=(0.0, 0.0),
+        video_quality_range=(10.0, 10.0),
+    )  # fmt: skip
+
+
 def test_the_shutter_samples_a_free_fall_at_its_own_times():
     """In free fall the carried anchors are the analytic ballistic path at each sample's time
     (the midpoints of equal parts of the exposure, centred on the frame's time); before frame 0
@@ -55,12 +66,7 @@ def test_an_open_shutter_blurs_the_moving_object_and_changes_nothing_else(tmp_pa
     coverage over ½) keep about the object's size."""
     from reconphys.data.scene import draw_scene
 
-    # no sensor noise, the finest compression: the frames differ by the shutter alone
-    sharp = make_settings(
-        scene="realistic", objects=1, test_objects=0, samples_per_object=2, resolution=32,
-        num_gaussians=300, num_anchors=64, toss_fraction=0.0, max_vertical_speed=0.0,
-        max_horizontal_speed=0.0, noise_range=(0.0, 0.0), video_quality_range=(10.0, 10.0),
-    )  # fmt: skip
+    sharp = still_drops(samples=2, resolution=32)
     blurred = replace(sharp, exposure_range_s=(DT, DT))
     assert sharp.fingerprint() != blurred.fingerprint()
     assert replace(sharp, exposure_range_s=(0.0, 0.0)).fingerprint() == sharp.fingerprint()
@@ -110,12 +116,7 @@ def test_a_rolling_readout_catches_the_falling_object_lower_row_by_row(tmp_path)
     the scene are the seed's, and the stored scene says the readout."""
     from reconphys.data.scene import draw_scene
 
-    # no sensor noise, the finest compression: the frames differ by the readout alone
-    settings = make_settings(
-        scene="realistic", objects=1, test_objects=0, samples_per_object=1, resolution=64,
-        num_gaussians=300, num_anchors=64, toss_fraction=0.0, max_vertical_speed=0.0,
-        max_horizontal_speed=0.0, noise_range=(0.0, 0.0), video_quality_range=(10.0, 10.0),
-    )  # fmt: skip
+    settings = still_drops(samples=1, resolution=64)
     rolling = replace(settings, readout_range_s=(DT, DT))
     a, b = draw_scene(settings, "object-0", 0), draw_scene(rolling, "object-0", 0)
     assert b.readout_s == DT and replace(b, readout_s=0.0) == a
