@@ -179,32 +179,28 @@ def render_realistic(
     bool (the object's coverage over ½, as the sensor caught it) and the V mp4 files."""
     anchors_np = anchors.detach().cpu().double().numpy()
     cameras = framed_cameras(anchors_np, spec, settings.resolution)
-    if (spec.exposure_s > 0 or spec.readout_s > 0) and velocities is None:
-        raise ValueError("an open shutter or a rolling readout needs the velocities")
-    ground, dt = asset.physics.ground_height, settings.frame_dt
-    if spec.readout_s > 0:  # a rolling shutter: each band of rows at its own time
-        height = settings.resolution
-        rgb = torch.zeros(4, anchors.shape[0], height, height, 3)
-        alpha = torch.zeros(4, anchors.shape[0], height, height)
-        for band in range(READOUT_BANDS):
-            rows = slice(band * height // READOUT_BANDS, (band + 1) * height // READOUT_BANDS)
-            shift = ((band + 0.5) / READOUT_BANDS - 0.5) * spec.readout_s
+    if spec.exposure_s == 0 and spec.readout_s == 0:
+        rgb, alpha = render_object_views(asset, anchors, cameras, spec.look)
+    else:  # a rolling shutter reads each band of rows at its own time, top to bottom
+        if velocities is None:
+            raise ValueError("an open shutter or a rolling readout needs the velocities")
+        ground, dt, height = asset.physics.ground_height, settings.frame_dt, settings.resolution
+        bands = READOUT_BANDS if spec.readout_s > 0 else 1
+        samples = READOUT_SHUTTER_SAMPLES if bands > 1 else SHUTTER_SAMPLES
+        rgb_rows, alpha_rows = [], []
+        for band in range(bands):
+            shift = ((band + 0.5) / bands - 0.5) * spec.readout_s
             if spec.exposure_s > 0:
                 moments = shutter_anchors(
-                    anchors, velocities, spec.exposure_s, dt, ground, READOUT_SHUTTER_SAMPLES, shift
+                    anchors, velocities, spec.exposure_s, dt, ground, samples, shift
                 )
             else:
                 moments = carried_anchors(anchors, velocities, [shift], dt, ground)
             rgb_band, alpha_band = _render_moments(asset, moments, cameras, spec.look)
-            rgb[:, :, rows], alpha[:, :, rows] = (
-                rgb_band[:, :, rows].cpu(),
-                alpha_band[:, :, rows].cpu(),
-            )
-    elif spec.exposure_s > 0:
-        moments = shutter_anchors(anchors, velocities, spec.exposure_s, dt, ground)
-        rgb, alpha = _render_moments(asset, moments, cameras, spec.look)
-    else:
-        rgb, alpha = render_object_views(asset, anchors, cameras, spec.look)
+            rows = slice(band * height // bands, (band + 1) * height // bands)
+            rgb_rows.append(rgb_band[:, :, rows])
+            alpha_rows.append(alpha_band[:, :, rows])
+        rgb, alpha = torch.cat(rgb_rows, 2), torch.cat(alpha_rows, 2)
     background = scene_background(cameras, spec.look)
     extent = anchors_np[0].max(0) - anchors_np[0].min(0)
     spacing = float(np.prod(np.maximum(extent, 1e-3)) / anchors_np.shape[1]) ** (1 / 3)

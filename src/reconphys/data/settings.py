@@ -103,7 +103,7 @@ class DataSettings:
     hand_share: float = 0.0
     # How long each realistic sample's shutter stays open, seconds, drawn uniformly from this
     # range from a stream of its own (data/scene.py): the object blurred along its motion over
-    # that time, centred on the frame's time (data/generate.py motion_blurred). A phone's video
+    # that time, centred on the frame's time (data/generate.py shutter_anchors). A phone's video
     # indoors keeps it open up to the whole frame (1/30 s); at (0, 0) every frame is sharp
     exposure_range_s: tuple[float, float] = (0.0, 0.0)
     # How long each realistic sample's sensor takes to read its rows, top to bottom, seconds,
@@ -230,6 +230,19 @@ class DataSettings:
                 raise InputError(
                     f"[{low}, {high}] must satisfy {lowest} ≤ low ≤ high ≤ {highest}", field=name
                 )
+        for flag, name in (("--exposure", "exposure_range_s"), ("--readout", "readout_range_s")):
+            low, high = getattr(self, name)
+            if not (0 <= low <= high <= self.frame_dt):
+                raise InputError(
+                    f"[{low:g}, {high:g}] s must satisfy 0 ≤ low ≤ high ≤ the frame interval "
+                    f"({self.frame_dt:g} s): a sensor exposes and reads once a frame",
+                    field=f"{flag} ({name})",
+                )
+        for name in ("vivid_share", "contrast_share", "hand_share"):
+            share = getattr(self, name)
+            if not (isinstance(share, (int, float)) and 0 <= share <= 1):
+                flag = "--" + name.replace("_", "-")
+                raise InputError(f"must be in [0, 1], got {share!r}", field=flag)
         if self.scene == "plain":  # the realistic look's draws, asked of the plain one
             for flag, value in (
                 ("--vivid-share", self.vivid_share),
@@ -244,19 +257,6 @@ class DataSettings:
                         "to the realistic look only; add --scene realistic",
                         field=flag,
                     )
-        for flag, name in (("--exposure", "exposure_range_s"), ("--readout", "readout_range_s")):
-            low, high = getattr(self, name)
-            if not (0 <= low <= high <= self.frame_dt):
-                raise InputError(
-                    f"[{low:g}, {high:g}] s must satisfy 0 ≤ low ≤ high ≤ the frame interval "
-                    f"({self.frame_dt:g} s): a sensor exposes and reads once a frame",
-                    field=f"{flag} ({name})",
-                )
-        for name in ("vivid_share", "contrast_share", "hand_share"):
-            share = getattr(self, name)
-            if not (isinstance(share, (int, float)) and 0 <= share <= 1):
-                flag = "--" + name.replace("_", "-")
-                raise InputError(f"must be in [0, 1], got {share!r}", field=flag)
         first, last = self.contact_frame_range
         if not (0 < first <= last < self.num_frames - 1):
             raise InputError(
