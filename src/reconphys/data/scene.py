@@ -61,6 +61,14 @@ class SceneSpec:
         return out if self.hand is None else {**out, "hand": self.hand.to_dict()}
 
 
+def _drawn_seconds(seed, stream: int, bounds: tuple[float, float]) -> float:
+    """Uniform over ``bounds`` (seconds) from the sample's ``stream``; 0 when ``bounds`` is (0, 0),
+    that stream never drawn."""
+    if not max(bounds) > 0:
+        return 0.0
+    return float(np.random.default_rng([seed, stream]).uniform(*bounds))
+
+
 def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> SceneSpec:
     """The look of sample ``sample_index`` of ``object_id`` (a stream apart from its physics)."""
     seed = sample_seed(settings.seed, object_id, sample_index)
@@ -80,14 +88,8 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         held = np.random.default_rng([seed, HAND_STREAM])
         if held.random() < settings.hand_share:
             hand = draw_hand(held)
-    exposure = 0.0
-    if max(settings.exposure_range_s) > 0:
-        shutter = np.random.default_rng([seed, EXPOSURE_STREAM])
-        exposure = float(shutter.uniform(*settings.exposure_range_s))
-    readout = 0.0
-    if max(settings.readout_range_s) > 0:
-        rows = np.random.default_rng([seed, READOUT_STREAM])
-        readout = float(rows.uniform(*settings.readout_range_s))
+    exposure = _drawn_seconds(seed, EXPOSURE_STREAM, settings.exposure_range_s)
+    readout = _drawn_seconds(seed, READOUT_STREAM, settings.readout_range_s)
     return SceneSpec(
         size=size,
         look=look,
