@@ -7,8 +7,9 @@ views 1–3 (unseen) → PSNR against the stored frames over the truth's foregro
 pixels, as ``evaluate``); beside it two scores that count Gaussians spilled past the object's
 outline, which that one does not: PSNR over the whole image (the object on black) in the unseen
 views, and their silhouette IoU (alpha > 0.5 against the truth's pixels); Chamfer distance
-(squared, m², as ``evaluate``) between the predicted and the true Gaussian centres at frame 0.
-Rows:
+(squared, m², as ``evaluate``) between the predicted and the true Gaussian centres at frame 0;
+the centres' extent along view 0's depth over the truth's (a shape too deep along the view sits
+too low: the asset lands early) and the lowest centre's height against the truth's. Rows:
 
 - each ``--model`` (a whole-frame model, or a crop model with the object's distance read from
   the video's free fall as ``predict`` reads it, ``object_distance``, its Gaussians on the
@@ -74,6 +75,10 @@ def main() -> None:
     rows: dict[str, dict[str, list[float]]] = {}
     started = time.perf_counter()
 
+    def depth_extent(means, w2c) -> float:  # 5–95 % extent of the centres in camera z, m
+        z = means @ w2c[2, :3] + w2c[2, 3]
+        return float(torch.quantile(z, 0.95) - torch.quantile(z, 0.05))
+
     def add(name: str, gaussians, cameras, targets, truth_means) -> str:
         with torch.no_grad():
             out = render(gaussians, cameras)
@@ -84,8 +89,12 @@ def main() -> None:
         drawn = out.alpha.reshape(targets.shape[:-1])[1:] > 0.5
         iou = (drawn & truth).sum((-1, -2)) / (drawn | truth).sum((-1, -2)).clamp_min(1)
         row = rows.setdefault(
-            name, {k: [] for k in ("input", "novel", "all", "cd", "n", "whole", "iou")}
+            name,
+            {k: [] for k in ("input", "novel", "all", "cd", "n", "whole", "iou", "deep", "low")},
         )
+        w2c0 = cameras.world_to_cam[0].to(truth_means)
+        row["deep"].append(depth_extent(gaussians.means, w2c0) / depth_extent(truth_means, w2c0))
+        row["low"].append(float(gaussians.means[:, 2].min() - truth_means[:, 2].min()))
         row["whole"].append(float(whole.nanmean()))
         row["iou"].append(float(iou.mean()))
         row["input"].append(float(scores[0]))
@@ -161,7 +170,8 @@ def main() -> None:
         f"look, {size} px), {time.perf_counter() - started:.0f} s. PSNR of frame 0 over the "
         "truth's foreground: all 4 views / input view 0 / unseen views 1–3; Chamfer (m²); "
         "Gaussians kept; the unseen views' PSNR over the whole image and silhouette IoU (spill "
-        "counted)"
+        "counted); the centres' depth extent along view 0 over the truth's (5–95 %, median); the "
+        "lowest centre's height − the truth's (cm, mean)"
     )
     for name, values in rows.items():
         print(
@@ -169,7 +179,9 @@ def main() -> None:
             f"{statistics.fmean(values['input']):6.2f} dB  "
             f"{statistics.fmean(values['novel']):6.2f} dB  "
             f"{statistics.fmean(values['cd']):.3e}  {statistics.fmean(values['n']):7.0f}  "
-            f"{statistics.fmean(values['whole']):6.2f} dB  {statistics.fmean(values['iou']):.3f}"
+            f"{statistics.fmean(values['whole']):6.2f} dB  {statistics.fmean(values['iou']):.3f}  "
+            f"×{statistics.median(values['deep']):.2f}  "
+            f"{100 * statistics.fmean(values['low']):+5.1f} cm"
         )
 
 

@@ -138,6 +138,10 @@ def test_train_gs_config_file_and_flags(monkeypatch, tmp_path):
     assert dataclasses.replace(seen[1], steps=7) == seen[2]
     result = runner.invoke(app, ["train-gs", "--out", "o"])
     assert result.exit_code == 2 and "--data: missing" in result.output
+    result = runner.invoke(app, ["train-gs", *config, "--shape-weight", "0.5"])
+    assert result.exit_code == 0 and seen[-1].shape_weight == 0.5, result.output
+    result = runner.invoke(app, ["train-gs", *config, "--shape-weight", "-1"])
+    assert result.exit_code == 2 and "--shape-weight: must be ≥ 0" in result.output
 
 
 @pytest.mark.parametrize(

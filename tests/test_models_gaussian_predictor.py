@@ -20,6 +20,7 @@ from reconphys.models.gaussian_predictor import (
     DETAIL_OVERLAP,
     GaussianPredictor,
     GaussianPredictorConfig,
+    billboard_gaussians,
     prune_gaussians,
     upsampled_outputs,
 )
@@ -27,7 +28,13 @@ from reconphys.models.gaussian_shipped import load_gaussian_predictor
 from reconphys.models.model_input import frame_crop
 from reconphys.models.reconstruct import object_distance
 from reconphys.render import Cameras, render
-from reconphys.train.gaussians import GaussianTrainSettings, train_gaussian_predictor
+from reconphys.train.gaussians import (
+    GaussianTrainSettings,
+    depth_error,
+    frame0_views,
+    shape_error,
+    train_gaussian_predictor,
+)
 
 
 def quaternion_matrix(q: torch.Tensor) -> torch.Tensor:  # [..., 4] wxyz → [..., 3, 3]
@@ -376,6 +383,65 @@ def test_a_crop_model_trains_on_the_realistic_look(tmp_path):
     log = [json.loads(x) for x in (out / "log.jsonl").read_text().splitlines()]
     assert all(math.isfinite(r["loss"]) for r in log)
     assert load_gaussian_predictor(out).model.config.crop
+    assert "shape" not in log[0]
+
+    settings.out, settings.shape_weight, settings.depth_weight = str(tmp_path / "c"), 1.0, 1.0
+    out = train_gaussian_predictor(settings, progress=False, log=lambda s: None)
+    log = [json.loads(x) for x in (out / "log.jsonl").read_text().splitlines()]
+    assert all(math.isfinite(r["shape"]) and r["shape"] > 0 for r in log)
+    assert all(math.isfinite(r["depth"]) for r in log)
+    assert all(r["loss"] > r["colour"] for r in log)  # the shape terms are in the loss
+
+    # The true centres are frame 0's object: they project onto its stored mask.
+    from reconphys.data import DropDataset
+
+    dataset = DropDataset(data, split="train", frames=[0])
+    views = frame0_views(dataset, 0, points=True)
+    cam = views["points"] @ views["world_to_cam"][0, :3, :3].T + views["world_to_cam"][0, :3, 3]
+    uv = cam[:, :2] / cam[:, 2:] * views["K"][0, [0, 1], [0, 1]] + views["K"][0, :2, 2]
+    size = views["masks"].shape[-1]
+    inside = ((uv >= 0) & (uv < size)).all(1)
+    pixel = uv[inside].long()
+    on_mask = views["masks"][0][pixel[:, 1], pixel[:, 0]] > 0.5
+    assert float(inside.float().mean()) == 1.0
+    assert float(on_mask.float().mean()) > 0.8, float(on_mask.float().mean())
+
+
+def test_the_depth_error_is_the_squared_depth_gap_where_both_cover():
+    """Two flat cut-outs of one square, 2.0 m and 2.1 m from the camera: every covered pixel's
+    expected depth is its plane's, so the error is 0.1² over the centres' mean squared radius
+    in that view, and 0 against itself; a view where they do not overlap scores 0."""
+    camera = default_camera(32, 32, view=0)
+    K, w2c = camera.K.float(), camera.world_to_cam.float()
+    mask = torch.zeros(32, 32)
+    mask[10:22, 8:20] = 1
+    image = torch.full((32, 32, 3), 0.5)
+    near = billboard_gaussians(image, mask, K, w2c, 2.0)
+    far = billboard_gaussians(image, mask, K, w2c, 2.1)
+    cameras = Cameras(K[None], w2c[None], 32, 32)
+    truth, out = render(near, cameras), render(far, cameras)
+    radius2 = float(((near.means - near.means.mean(0)) ** 2).sum(1).mean())
+    assert math.isclose(float(depth_error(out, truth, near.means)[0]), 0.01 / radius2, rel_tol=1e-3)
+    assert float(depth_error(truth, truth, near.means)[0]) == 0.0
+    moved = near.map(lambda t: t.clone())
+    moved.means = moved.means + 10.0  # out of view: nothing covered by both
+    assert float(depth_error(render(moved, cameras), truth, near.means)[0]) == 0.0
+
+
+def test_the_shape_error_is_the_mean_squared_nearest_distance_over_the_size():
+    """shape_error against scipy's k-d tree: one-sided (a subset of the object scores 0), in
+    units of the object's mean squared radius (the same at any scale)."""
+    from scipy.spatial import cKDTree
+
+    generator = torch.Generator().manual_seed(0)
+    points = torch.randn(300, 3, generator=generator, dtype=torch.float64) * 0.1
+    assert float(shape_error(points[:50], points)) == 0.0
+    means = points[:80] + 0.02 * torch.randn(80, 3, generator=generator, dtype=torch.float64)
+    nearest, _ = cKDTree(points.numpy()).query(means.numpy())
+    radius2 = ((points - points.mean(0)) ** 2).sum(1).mean()
+    expected = (nearest**2).mean() / float(radius2)
+    assert math.isclose(float(shape_error(means, points)), expected, rel_tol=1e-9)
+    assert math.isclose(float(shape_error(3 * means, 3 * points)), expected, rel_tol=1e-9)
 
 
 def sliding_masks(rows: slice) -> torch.Tensor:  # [30, 64, 64]: 8 px wide, 1 px a frame right

@@ -58,6 +58,7 @@ GS_SETTINGS = (
     "batch_size",
     "lr",
     "silhouette_weight",
+    "shape_weight",
     "checkpoint_every",
     "seed",
 )
@@ -77,6 +78,9 @@ def train_gs(
     batch_size: int = typer.Option(4, help="Samples per step."),
     lr: float = typer.Option(1e-3, help="Peak learning rate (cosine to 10 %)."),
     silhouette_weight: float = typer.Option(1.0, help="Weight of the alpha-vs-mask loss."),
+    shape_weight: float = typer.Option(
+        0.0, help="Weight of the shape term: predicted centres to the true ones (0: off)."
+    ),
     checkpoint_every: int = typer.Option(200, help="Steps between checkpoints."),
     seed: int = typer.Option(0, help="Seed of the initialisation and the batches."),
     threads: int = typer.Option(2, help="CPU threads (torch)."),
@@ -118,6 +122,8 @@ def train_gs(
             raise InputError(f"must be ≥ 1, got {value}", field=name)
     if not (math.isfinite(settings.lr) and settings.lr > 0):
         raise InputError(f"must be a positive number, got {settings.lr}", field="--lr")
+    if not (math.isfinite(settings.shape_weight) and settings.shape_weight >= 0):
+        raise InputError(f"must be ≥ 0, got {settings.shape_weight}", field="--shape-weight")
     if not Path(settings.data).is_dir():
         raise InputError("dataset folder not found", source=settings.data)
     set_cpu_threads(threads)

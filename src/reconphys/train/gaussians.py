@@ -3,7 +3,10 @@
 Each training sample is frame 0 of a dataset sample: the predictor reads one view (masked by the
 same background subtraction ``predict`` uses), its Gaussians on the object's pixels are rendered
 into all four views, and the loss is the mean squared colour error plus ``silhouette_weight`` ×
-the mean squared error between the rendered alpha and the views' masks. The input view cycles
+the mean squared error between the rendered alpha and the views' masks, plus (``shape_weight`` > 0)
+a shape term: the predicted centres' mean squared distance to the object's nearest true Gaussian
+centre over the object's mean squared radius — the views' colours alone leave the Gaussians' depth
+along the input view loose (docs/usage.md "The asset's own landing"). The input view cycles
 through 0–3 so that every view is both input and target.
 
 A crop predictor (``predictor.crop = true``, docs/usage.md "The 3DGS predictor") reads the
@@ -57,14 +60,17 @@ class GaussianTrainSettings:
     checkpoint_every: int = 200  # steps between checkpoints
     depth_noise: float = 0.1  # crop models: the reference depth × exp(N(0, σ²))
     input_weight: float = 1.0  # the input view's loss weight (each other view's is 1)
+    shape_weight: float = 0.0  # weight of the shape term (0: colours and silhouettes only)
+    depth_weight: float = 0.0  # weight of the depth term: rendered depth vs the truth's (0: off)
     predictor: dict = field(default_factory=dict)  # GaussianPredictorConfig overrides
 
 
-def frame0_views(dataset: DropDataset, index: int) -> dict:
+def frame0_views(dataset: DropDataset, index: int, points: bool = False) -> dict:
     """Frame 0 of all views of a sample: images [V, R, R, 3] (the object on black), masks
     [V, R, R], K, world_to_cam, and ``depth`` [V]: the camera z of the object's centre (its
-    anchors' mean), metres. Plain look: the masks by background subtraction (as ``predict``);
-    realistic look: the stored true masks, the frames masked by them."""
+    anchors' mean), metres; with ``points``, also ``points`` [N, 3]: the true Gaussians' centres
+    at frame 0, world frame, metres. Plain look: the masks by background subtraction (as
+    ``predict``); realistic look: the stored true masks, the frames masked by them."""
     item = dataset[index]
     images = item["frames"][:, 0].float()
     if dataset.settings.scene == "plain":
@@ -74,13 +80,21 @@ def frame0_views(dataset: DropDataset, index: int) -> dict:
         images = images * masks[..., None]
     w2c = item["world_to_cam"].float()
     centre = item["anchors"][0].float().mean(0)  # [3] world, frame 0
-    return {
+    views = {
         "images": images,
         "masks": masks,
         "K": item["K"].float(),
         "world_to_cam": w2c,
         "depth": (w2c[:, :3, :3] @ centre + w2c[:, :3, 3])[:, 2],
     }
+    if points:
+        with torch.no_grad():
+            asset = dataset.asset(index)
+            truth = asset.gaussians.map(lambda t: t.float())
+            truth.means = asset.gaussian_means(item["anchors"][:1])[0].float()
+        views["points"] = truth.means
+        views["truth"] = truth
+    return views
 
 
 def crop_views(views: dict, resolution: int, margin: float) -> dict:
@@ -93,13 +107,29 @@ def crop_views(views: dict, resolution: int, margin: float) -> dict:
         frame_crop(views["images"][v], views["masks"][v], views["K"][v], resolution, margin)
         for v in shown
     ]
-    return {
+    cropped = {
         "images": torch.stack([c[0] for c in crops]),
         "masks": torch.stack([c[1] for c in crops]),
         "K": torch.stack([c[2] for c in crops]),
         "world_to_cam": views["world_to_cam"][shown],
         "depth": views["depth"][shown],
     }
+    for name in ("points", "truth"):
+        if name in views:
+            cropped[name] = views[name]
+    return cropped
+
+
+def shape_error(
+    means: torch.Tensor,  # [N, 3] predicted centres, metres
+    points: torch.Tensor,  # [M, 3] the object's true centres, metres
+) -> torch.Tensor:  # [] dimensionless
+    """Mean squared distance of each predicted centre to its nearest true one, over the true
+    centres' mean squared distance to their mean: 0 when every Gaussian lies on the object,
+    whatever its size; one-sided, so a shell of the seen side is not pulled to the hidden one."""
+    radius2 = ((points - points.mean(0)) ** 2).sum(1).mean().clamp_min(1e-12)
+    nearest2 = ((means[:, None] - points[None]) ** 2).sum(-1).min(1).values  # exact, no sqrt
+    return nearest2.mean() / radius2
 
 
 def sample_loss(
@@ -109,6 +139,8 @@ def sample_loss(
     silhouette_weight: float,
     depth_scatter: float = 1.0,  # crop models: the reference depth × this
     input_weight: float = 1.0,  # the input view's loss weight (each other view's is 1)
+    shape_weight: float = 0.0,  # the shape term's weight (needs views["points"])
+    depth_weight: float = 0.0,  # the depth term's weight (needs views["truth"])
 ) -> tuple[torch.Tensor, dict]:
     """Loss of one sample read from ``input_view`` and rendered into every view (a crop model:
     every view's object crop, ``views`` as :func:`crop_views` gives them)."""
@@ -134,7 +166,32 @@ def sample_loss(
     alpha = out.alpha.reshape(views["masks"].shape)
     silhouette = ((alpha - views["masks"]) ** 2).mean((1, 2))  # [V]
     loss = (weights * (colour + silhouette_weight * silhouette)).sum()
-    return loss, {"colour": colour.mean().item(), "silhouette": silhouette.mean().item()}
+    parts = {"colour": colour.mean().item(), "silhouette": silhouette.mean().item()}
+    if shape_weight > 0:
+        shape = shape_error(object_gaussians.means, views["points"])
+        loss = loss + shape_weight * shape
+        parts["shape"] = shape.item()
+    if depth_weight > 0:
+        with torch.no_grad():
+            truth = render(views["truth"], cameras)
+        depth = depth_error(out, truth, views["points"])  # [V]
+        loss = loss + depth_weight * (weights * depth).sum()
+        parts["depth"] = depth.mean().item()
+    return loss, parts
+
+
+def depth_error(
+    out,  # RenderOutput of the prediction: depth, alpha [V, H, W]
+    truth,  # RenderOutput of the true Gaussians in the same cameras
+    points: torch.Tensor,  # [M, 3] the true centres (their spread sets the unit)
+) -> torch.Tensor:  # [V] dimensionless
+    """Per view, the mean squared difference of the rendered depth (expected camera z) against
+    the truth's over the pixels both cover (alpha > 0.5), over the true centres' mean squared
+    radius: where each view sees the object's surface, not only its outline."""
+    radius2 = ((points - points.mean(0)) ** 2).sum(1).mean().clamp_min(1e-12)
+    both = ((out.alpha > 0.5) & (truth.alpha > 0.5)).float().reshape(truth.depth.shape)
+    squared = (out.depth.reshape(truth.depth.shape) - truth.depth) ** 2 * both
+    return squared.sum((-1, -2)) / both.sum((-1, -2)).clamp_min(1) / radius2
 
 
 def _lr(step: int, settings: GaussianTrainSettings) -> float:
@@ -193,7 +250,8 @@ def train_gaussian_predictor(
         losses, parts = [], []
         scatter = np.exp(settings.depth_noise * rng.standard_normal(len(picks)))
         for b, index in enumerate(picks):
-            views = frame0_views(dataset, int(index))
+            points = settings.shape_weight > 0 or settings.depth_weight > 0
+            views = frame0_views(dataset, int(index), points=points)
             if config.crop:
                 views = crop_views(views, config.resolution, config.crop_margin)
             loss, part = sample_loss(
@@ -203,6 +261,8 @@ def train_gaussian_predictor(
                 settings.silhouette_weight,
                 float(scatter[b]),
                 settings.input_weight,
+                settings.shape_weight,
+                settings.depth_weight,
             )
             losses.append(loss)
             parts.append(part)
@@ -217,6 +277,9 @@ def train_gaussian_predictor(
             "colour": float(np.mean([p["colour"] for p in parts])),
             "silhouette": float(np.mean([p["silhouette"] for p in parts])),
         }
+        for name in ("shape", "depth"):
+            if name in parts[0]:
+                record[name] = float(np.mean([p[name] for p in parts]))
         with open(log_path, "a") as f:
             f.write(json.dumps(record) + "\n")
         if progress:
