@@ -396,10 +396,10 @@ def test_a_crop_model_trains_on_the_realistic_look(tmp_path):
     from reconphys.data import DropDataset
 
     dataset = DropDataset(data, split="train", frames=[0])
-    views = frame0_views(dataset, 0, points=True)
-    cam = views["points"] @ views["world_to_cam"][0, :3, :3].T + views["world_to_cam"][0, :3, 3]
-    uv = cam[:, :2] / cam[:, 2:] * views["K"][0, [0, 1], [0, 1]] + views["K"][0, :2, 2]
+    views = frame0_views(dataset, 0, truth=True)
     size = views["masks"].shape[-1]
+    view0 = CameraSpec(views["K"][0], views["world_to_cam"][0], size, size)
+    uv, _ = project(views["truth"].means, view0)
     inside = ((uv >= 0) & (uv < size)).all(1)
     pixel = uv[inside].long()
     on_mask = views["masks"][0][pixel[:, 1], pixel[:, 0]] > 0.5

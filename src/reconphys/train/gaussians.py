@@ -3,10 +3,10 @@
 Each training sample is frame 0 of a dataset sample: the predictor reads one view (masked by the
 same background subtraction ``predict`` uses), its Gaussians on the object's pixels are rendered
 into all four views, and the loss is the mean squared colour error plus ``silhouette_weight`` ×
-the mean squared error between the rendered alpha and the views' masks, plus (``shape_weight`` > 0)
-a shape term: the predicted centres' mean squared distance to the object's nearest true Gaussian
-centre over the object's mean squared radius — the views' colours alone leave the Gaussians' depth
-along the input view loose (docs/usage.md "The asset's own landing"). The input view cycles
+the mean squared error between the rendered alpha and the views' masks, plus two optional
+geometry terms against the true Gaussians (:func:`shape_error`, ``shape_weight``; and
+:func:`depth_error`, ``depth_weight``) — the views' colours alone leave the Gaussians' depth
+along the input view loose (docs/usage.md "The shape taught by the truth"). The input view cycles
 through 0–3 so that every view is both input and target.
 
 A crop predictor (``predictor.crop = true``, docs/usage.md "The 3DGS predictor") reads the
@@ -65,11 +65,11 @@ class GaussianTrainSettings:
     predictor: dict = field(default_factory=dict)  # GaussianPredictorConfig overrides
 
 
-def frame0_views(dataset: DropDataset, index: int, points: bool = False) -> dict:
+def frame0_views(dataset: DropDataset, index: int, truth: bool = False) -> dict:
     """Frame 0 of all views of a sample: images [V, R, R, 3] (the object on black), masks
     [V, R, R], K, world_to_cam, and ``depth`` [V]: the camera z of the object's centre (its
-    anchors' mean), metres; with ``points``, also ``points`` [N, 3]: the true Gaussians' centres
-    at frame 0, world frame, metres. Plain look: the masks by background subtraction (as
+    anchors' mean), metres; with ``truth``, also ``truth``: the true Gaussians at frame 0, world
+    frame, metres. Plain look: the masks by background subtraction (as
     ``predict``); realistic look: the stored true masks, the frames masked by them."""
     item = dataset[index]
     images = item["frames"][:, 0].float()
@@ -87,13 +87,11 @@ def frame0_views(dataset: DropDataset, index: int, points: bool = False) -> dict
         "world_to_cam": w2c,
         "depth": (w2c[:, :3, :3] @ centre + w2c[:, :3, 3])[:, 2],
     }
-    if points:
+    if truth:
         with torch.no_grad():
             asset = dataset.asset(index)
-            truth = asset.gaussians.map(lambda t: t.float())
-            truth.means = asset.gaussian_means(item["anchors"][:1])[0].float()
-        views["points"] = truth.means
-        views["truth"] = truth
+            views["truth"] = asset.gaussians.map(lambda t: t.float())
+            views["truth"].means = asset.gaussian_means(item["anchors"][:1])[0].float()
     return views
 
 
@@ -114,10 +112,13 @@ def crop_views(views: dict, resolution: int, margin: float) -> dict:
         "world_to_cam": views["world_to_cam"][shown],
         "depth": views["depth"][shown],
     }
-    for name in ("points", "truth"):
-        if name in views:
-            cropped[name] = views[name]
+    if "truth" in views:
+        cropped["truth"] = views["truth"]
     return cropped
+
+
+def _mean_squared_radius(points: torch.Tensor) -> torch.Tensor:  # [M, 3] metres → [] m²
+    return ((points - points.mean(0)) ** 2).sum(1).mean().clamp_min(1e-12)
 
 
 def shape_error(
@@ -127,7 +128,7 @@ def shape_error(
     """Mean squared distance of each predicted centre to its nearest true one, over the true
     centres' mean squared distance to their mean: 0 when every Gaussian lies on the object,
     whatever its size; one-sided, so a shell of the seen side is not pulled to the hidden one."""
-    radius2 = ((points - points.mean(0)) ** 2).sum(1).mean().clamp_min(1e-12)
+    radius2 = _mean_squared_radius(points)
     nearest2 = ((means[:, None] - points[None]) ** 2).sum(-1).min(1).values  # exact, no sqrt
     return nearest2.mean() / radius2
 
@@ -139,7 +140,7 @@ def sample_loss(
     silhouette_weight: float,
     depth_scatter: float = 1.0,  # crop models: the reference depth × this
     input_weight: float = 1.0,  # the input view's loss weight (each other view's is 1)
-    shape_weight: float = 0.0,  # the shape term's weight (needs views["points"])
+    shape_weight: float = 0.0,  # the shape term's weight (needs views["truth"])
     depth_weight: float = 0.0,  # the depth term's weight (needs views["truth"])
 ) -> tuple[torch.Tensor, dict]:
     """Loss of one sample read from ``input_view`` and rendered into every view (a crop model:
@@ -168,13 +169,13 @@ def sample_loss(
     loss = (weights * (colour + silhouette_weight * silhouette)).sum()
     parts = {"colour": colour.mean().item(), "silhouette": silhouette.mean().item()}
     if shape_weight > 0:
-        shape = shape_error(object_gaussians.means, views["points"])
+        shape = shape_error(object_gaussians.means, views["truth"].means)
         loss = loss + shape_weight * shape
         parts["shape"] = shape.item()
     if depth_weight > 0:
         with torch.no_grad():
             truth = render(views["truth"], cameras)
-        depth = depth_error(out, truth, views["points"])  # [V]
+        depth = depth_error(out, truth, views["truth"].means)  # [V]
         loss = loss + depth_weight * (weights * depth).sum()
         parts["depth"] = depth.mean().item()
     return loss, parts
@@ -188,7 +189,7 @@ def depth_error(
     """Per view, the mean squared difference of the rendered depth (expected camera z) against
     the truth's over the pixels both cover (alpha > 0.5), over the true centres' mean squared
     radius: where each view sees the object's surface, not only its outline."""
-    radius2 = ((points - points.mean(0)) ** 2).sum(1).mean().clamp_min(1e-12)
+    radius2 = _mean_squared_radius(points)
     both = ((out.alpha > 0.5) & (truth.alpha > 0.5)).float().reshape(truth.depth.shape)
     squared = (out.depth.reshape(truth.depth.shape) - truth.depth) ** 2 * both
     return squared.sum((-1, -2)) / both.sum((-1, -2)).clamp_min(1) / radius2
@@ -240,6 +241,7 @@ def train_gaussian_predictor(
             steps, desc="train-gs", unit="step", initial=first_step - 1, total=settings.steps
         )
     started = time.perf_counter()
+    with_truth = settings.shape_weight > 0 or settings.depth_weight > 0
     model.train()
     for step in steps:
         rng = np.random.default_rng([settings.seed, step])
@@ -250,8 +252,7 @@ def train_gaussian_predictor(
         losses, parts = [], []
         scatter = np.exp(settings.depth_noise * rng.standard_normal(len(picks)))
         for b, index in enumerate(picks):
-            points = settings.shape_weight > 0 or settings.depth_weight > 0
-            views = frame0_views(dataset, int(index), points=points)
+            views = frame0_views(dataset, int(index), truth=with_truth)
             if config.crop:
                 views = crop_views(views, config.resolution, config.crop_margin)
             loss, part = sample_loss(
