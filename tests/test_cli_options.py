@@ -142,6 +142,22 @@ def test_train_gs_config_file_and_flags(monkeypatch, tmp_path):
     assert result.exit_code == 0 and seen[-1].shape_weight == 0.5, result.output
     result = runner.invoke(app, ["train-gs", *config, "--shape-weight", "-1"])
     assert result.exit_code == 2 and "--shape-weight: must be ≥ 0" in result.output
+    args = ["train-gs", *config, "--depth-weight", "0.2", "--init", "runs/a/model.safetensors"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert (seen[-1].depth_weight, seen[-1].init) == (0.2, "runs/a/model.safetensors")
+    assert (seen[1].depth_weight, seen[1].init) == (0.0, "")
+    result = runner.invoke(app, ["train-gs", *config, "--depth-weight", "nan"])
+    assert result.exit_code == 2 and "--depth-weight: must be ≥ 0" in result.output
+    # the shipped crop predictor's two stages: the second starts from the first's model, with
+    # the same predictor and the true distance (no scatter)
+    (tmp_path / "data" / "gs_realistic").mkdir(parents=True)
+    for name in ("gs_crop.toml", "gs_crop_tune.toml"):
+        args = ["train-gs", "--config", str(CONFIGS / name), "--threads", "1", "--no-progress"]
+        assert runner.invoke(app, args).exit_code == 0
+    base, tune = seen[-2:]
+    assert tune.init == f"{base.out}/model.safetensors" and tune.predictor == base.predictor
+    assert (base.depth_noise, tune.depth_noise) == (0.1, 0.0)
 
 
 @pytest.mark.parametrize(

@@ -3,6 +3,7 @@ gradients, pruning, and its training (loss goes down, exact resume)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -32,6 +33,7 @@ from reconphys.train.gaussians import (
     GaussianTrainSettings,
     depth_error,
     frame0_views,
+    scaled_about_camera,
     shape_error,
     train_gaussian_predictor,
 )
@@ -392,6 +394,22 @@ def test_a_crop_model_trains_on_the_realistic_look(tmp_path):
     assert all(math.isfinite(r["depth"]) for r in log)
     assert all(r["loss"] > r["colour"] for r in log)  # the shape terms are in the loss
 
+    # Fine-tuning starts from the given predictor's weights (a negligible step keeps them); one
+    # of other settings is refused, naming it.
+    start = load_gaussian_predictor(out).model.state_dict()
+    tuned = dataclasses.replace(settings, out=str(tmp_path / "d"), steps=1, lr=1e-12, init=str(out))
+    loaded = load_gaussian_predictor(train_gaussian_predictor(tuned, progress=False))
+    for name, tensor in loaded.model.state_dict().items():
+        assert torch.allclose(tensor, start[name], atol=1e-6), name
+    lineage = loaded.metadata["training"]["init"]  # the start's own training is kept
+    assert lineage["path"] == str(out) and lineage["training"]["settings"]["shape_weight"] == 1.0
+    other = dataclasses.replace(
+        tuned, out=str(tmp_path / "e"), predictor={**settings.predictor, "channels": [8]}
+    )
+    with pytest.raises(InputError, match="settings differ") as error:
+        train_gaussian_predictor(other, progress=False)
+    assert str(out) in str(error.value)
+
     # The true centres are frame 0's object: they project onto its stored mask.
     from reconphys.data import DropDataset
 
@@ -426,6 +444,31 @@ def test_the_depth_error_is_the_squared_depth_gap_where_both_cover():
     moved = near.map(lambda t: t.clone())
     moved.means = moved.means + 10.0  # out of view: nothing covered by both
     assert float(depth_error(render(moved, cameras), truth, near.means)[0]) == 0.0
+
+
+def test_gaussians_scaled_about_a_camera_look_the_same_there_and_lie_deeper():
+    """scaled_about_camera: in its own camera the picture is unchanged (a pinhole cannot see the
+    scale) and every pixel's depth is ×factor; from another view the two differ."""
+    generator = torch.Generator().manual_seed(1)
+    gaussians = Gaussians.from_activated(
+        means=torch.randn(60, 3, generator=generator) * 0.1 + torch.tensor([0.0, 0.0, 0.3]),
+        scales=torch.full((60, 3), 0.03),
+        opacities=torch.full((60,), 0.8),
+        colors=torch.rand(60, 3, generator=generator),
+        quats=torch.nn.functional.normalize(torch.randn(60, 4, generator=generator), dim=-1),
+    )
+    views = [default_camera(32, 32, view=v) for v in (0, 1)]
+    K = torch.stack([c.K.float() for c in views])
+    w2c = torch.stack([c.world_to_cam.float() for c in views])
+    cameras = Cameras(K, w2c, 32, 32)
+    before = render(gaussians, cameras)
+    after = render(scaled_about_camera(gaussians, w2c[0], 1.2), cameras)
+    assert torch.allclose(after.rgb[0], before.rgb[0], atol=1e-4)
+    assert torch.allclose(after.alpha[0], before.alpha[0], atol=1e-4)
+    covered = before.alpha[0].reshape(32, 32) > 0.5
+    ratio = after.depth[0].reshape(32, 32)[covered] / before.depth[0].reshape(32, 32)[covered]
+    assert torch.allclose(ratio, torch.full_like(ratio, 1.2), rtol=1e-3)
+    assert float((after.rgb[1] - before.rgb[1]).abs().max()) > 0.05
 
 
 def test_the_shape_error_is_the_mean_squared_nearest_distance_over_the_size():

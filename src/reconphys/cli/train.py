@@ -59,8 +59,10 @@ GS_SETTINGS = (
     "lr",
     "silhouette_weight",
     "shape_weight",
+    "depth_weight",
     "checkpoint_every",
     "seed",
+    "init",
 )
 
 
@@ -81,8 +83,17 @@ def train_gs(
     shape_weight: float = typer.Option(
         0.0, help="Weight of the shape term: predicted centres to the true ones (0: off)."
     ),
+    depth_weight: float = typer.Option(
+        0.0, help="Weight of the depth term: rendered depth to the true one, 4 views (0: off)."
+    ),
     checkpoint_every: int = typer.Option(200, help="Steps between checkpoints."),
     seed: int = typer.Option(0, help="Seed of the initialisation and the batches."),
+    init: str = typer.Option(
+        "",
+        "--init",
+        help="A trained 3DGS predictor (.safetensors or a run's folder) to start from "
+        "(fine-tuning; its [predictor] settings must be this run's).",
+    ),
     threads: int = typer.Option(2, help="CPU threads (torch)."),
     no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
     config: Path = typer.Option(
@@ -122,8 +133,12 @@ def train_gs(
             raise InputError(f"must be ≥ 1, got {value}", field=name)
     if not (math.isfinite(settings.lr) and settings.lr > 0):
         raise InputError(f"must be a positive number, got {settings.lr}", field="--lr")
-    if not (math.isfinite(settings.shape_weight) and settings.shape_weight >= 0):
-        raise InputError(f"must be ≥ 0, got {settings.shape_weight}", field="--shape-weight")
+    for name, value in (
+        ("--shape-weight", settings.shape_weight),
+        ("--depth-weight", settings.depth_weight),
+    ):
+        if not (math.isfinite(value) and value >= 0):
+            raise InputError(f"must be ≥ 0, got {value}", field=name)
     if not Path(settings.data).is_dir():
         raise InputError("dataset folder not found", source=settings.data)
     set_cpu_threads(threads)

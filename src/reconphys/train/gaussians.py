@@ -11,9 +11,15 @@ through 0–3 so that every view is both input and target.
 
 A crop predictor (``predictor.crop = true``, docs/usage.md "The 3DGS predictor") reads the
 input view's object crop (:func:`~reconphys.models.model_input.frame_crop`) with the object's true
-centre depth, scattered by ``depth_noise`` (the depth ``predict`` reads from the fall is that far
-off), and is rendered into the four views' object crops; it trains on either look (the realistic
-look's frames masked by its stored true masks).
+centre depth and is rendered into the four views' object crops; it trains on either look (the
+realistic look's frames masked by its stored true masks). ``depth_noise`` scatters that depth
+(off by default): its outputs are relative to the depth, so a scattered depth only moves and
+scales its object about the input camera, which the other views then punish — the network
+learns to hedge, smearing the object along the view, where ``predict`` gives it a depth that is
+consistent with everything else it reads (docs/usage.md "One object, not a hedge").
+
+``init`` starts from a trained predictor's weights (fine-tuning); its ``training`` record is
+kept in the new model's under ``init``.
 
 The run writes ``OUT/model.safetensors`` + ``model.json`` (the predictor), ``OUT/log.jsonl`` (one
 line per step) and ``OUT/checkpoint.pt`` every ``checkpoint_every`` steps; running the same
@@ -31,11 +37,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..assets.gaussians import Gaussians
 from ..capture.masks import subtract_background
 from ..data.dataset import DropDataset
 from ..errors import InputError
 from ..models.gaussian_predictor import GaussianPredictor, GaussianPredictorConfig
-from ..models.gaussian_shipped import save_gaussian_predictor
+from ..models.gaussian_shipped import load_gaussian_predictor, save_gaussian_predictor
 from ..models.model_input import frame_crop
 from ..render import Cameras, render
 from .checkpoint import resume_step, save_step
@@ -58,11 +65,20 @@ class GaussianTrainSettings:
     silhouette_weight: float = 1.0  # weight of the alpha-vs-mask loss
     seed: int = 0  # initialisation and batch order
     checkpoint_every: int = 200  # steps between checkpoints
-    depth_noise: float = 0.1  # crop models: the reference depth × exp(N(0, σ²))
+    depth_noise: float = 0.0  # crop models: the reference depth × exp(N(0, σ²)) (a hedge)
     input_weight: float = 1.0  # the input view's loss weight (each other view's is 1)
     shape_weight: float = 0.0  # weight of the shape term (0: colours and silhouettes only)
     depth_weight: float = 0.0  # weight of the depth term: rendered depth vs the truth's (0: off)
     predictor: dict = field(default_factory=dict)  # GaussianPredictorConfig overrides
+    init: str = ""  # a trained 3DGS predictor (.safetensors or a run's folder) to start from
+
+
+def _recorded(settings: GaussianTrainSettings) -> dict:
+    """The settings a checkpoint records: ``init`` only when given (older runs still resume)."""
+    recorded = asdict(settings)
+    if not recorded["init"]:
+        recorded.pop("init")
+    return recorded
 
 
 def frame0_views(dataset: DropDataset, index: int, truth: bool = False) -> dict:
@@ -173,12 +189,30 @@ def sample_loss(
         loss = loss + shape_weight * shape
         parts["shape"] = shape.item()
     if depth_weight > 0:
+        # the truth as the scattered depth told it: moved along the input view's rays by the
+        # scatter (the same image there), so the term scores the shape, not the scatter
+        told = scaled_about_camera(views["truth"], views["world_to_cam"][v], depth_scatter)
         with torch.no_grad():
-            truth = render(views["truth"], cameras)
-        depth = depth_error(out, truth, views["truth"].means)  # [V]
+            truth = render(told, cameras)
+        depth = depth_error(out, truth, told.means)  # [V]
         loss = loss + depth_weight * (weights * depth).sum()
         parts["depth"] = depth.mean().item()
     return loss, parts
+
+
+def scaled_about_camera(
+    gaussians: Gaussians,  # [N] world frame, metres
+    world_to_cam: torch.Tensor,  # [4, 4] the camera they are scaled about
+    factor: float,
+) -> Gaussians:
+    """The Gaussians ``factor`` times as far from the camera's centre and as large: the same
+    picture in that camera (a pinhole cannot tell them apart), ``factor`` times the depth."""
+    rotation, translation = world_to_cam[:3, :3], world_to_cam[:3, 3]
+    centre = -rotation.T @ translation  # [3] the camera's centre, world frame
+    scaled = gaussians.map(lambda t: t)
+    scaled.means = centre + factor * (gaussians.means - centre)
+    scaled.log_scales = gaussians.log_scales + math.log(factor)
+    return scaled
 
 
 def depth_error(
@@ -220,9 +254,19 @@ def train_gaussian_predictor(
         raise InputError(f"no samples in split {settings.split!r}", source=settings.data)
     torch.manual_seed(settings.seed)
     model = GaussianPredictor(config)
+    if settings.init:
+        start = load_gaussian_predictor(settings.init)
+        if start.model.config != config:
+            raise InputError(
+                "its predictor's settings differ from this run's (give the same [predictor] "
+                "and data resolution)",
+                source=settings.init,
+            )
+        model.load_state_dict(start.model.state_dict())
+        lineage = {"path": settings.init, "training": start.metadata.get("training")}
     optimizer = torch.optim.Adam(model.parameters(), lr=settings.lr)
     checkpoint_path = out / CHECKPOINT
-    first_step = resume_step(checkpoint_path, model, optimizer, asdict(settings), log)
+    first_step = resume_step(checkpoint_path, model, optimizer, _recorded(settings), log)
     out.mkdir(parents=True, exist_ok=True)
     (out / "settings.json").write_text(json.dumps(asdict(settings), indent=1) + "\n")
     log_path = out / "log.jsonl"
@@ -286,7 +330,7 @@ def train_gaussian_predictor(
         if progress:
             steps.set_postfix(loss=f"{record['loss']:.4f}")
         if step % settings.checkpoint_every == 0 or step == settings.steps:
-            save_step(checkpoint_path, model, optimizer, step, asdict(settings))
+            save_step(checkpoint_path, model, optimizer, step, _recorded(settings))
         if stop_after is not None and step >= stop_after:
             return out
     training = {
@@ -297,5 +341,7 @@ def train_gaussian_predictor(
         "wall_clock_seconds_last_session": round(time.perf_counter() - started, 1),
         "final_loss": record["loss"] if settings.steps >= first_step else None,
     }
+    if settings.init:
+        training["init"] = lineage
     save_gaussian_predictor(model.eval(), out / "model.safetensors", training)
     return out
