@@ -17,10 +17,12 @@ takes: view 0 of its first test sample as the mp4 alone (no camera file, no PLY,
 ``decode`` holds the mask segmenter (its share printed as ``masks``) and the camera read from
 the fall, and the object-centric networks make the Gaussians and read the physics; the same with
 the segmenter on whole frames (the twin of following the object, the ratio printed); where the
-CPU runs bfloat16 natively, the same with the segmenter in float32 (the fast path's twin, the ratio
-printed); then the same clip resized to 1080 × 1080 (a phone's shorter side), then — once, not
-best of — a cold ``reconphys predict --no-refine --preview-frames 0`` process on the mp4, what a
-user waits for (interpreter, imports and model loads included).
+segmenter runs in bfloat16 (``native_bfloat16``: the CPU runs it and a probe finds it faster),
+the same in float32 (the fast path's twin), and where the CPU runs bfloat16 but the probe chose
+float32, the same in bfloat16 (the ratio printed either way); then the same clip resized to
+1080 × 1080 (a phone's shorter side), then — once, not best of — a cold ``reconphys predict
+--no-refine --preview-frames 0`` process on the mp4, what a user waits for (interpreter, imports
+and model loads included).
 
     python benchmarks/bench_predict.py data/cpu_small [--sample ID] [--device cpu|cuda]
     python benchmarks/bench_predict.py data/cpu_small --realistic data/real_other
@@ -112,6 +114,15 @@ class SegmenterClock:
         samples.segment_frames = self._segment
 
 
+def bfloat16_supported() -> bool:
+    """oneDNN runs bfloat16 on this CPU at all (AVX-512 BF16 or AMX; native_bfloat16 also asks
+    its probe whether it is faster than float32 here)."""
+    try:
+        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    except (AttributeError, RuntimeError):
+        return False
+
+
 def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
     """The mp4 alone of a realistic recording, as recorded and at 1080 × 1080 (module doc)."""
     sample = first_test_sample(data)
@@ -133,6 +144,8 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
     ]
     if native_bfloat16():  # the segmenter's bfloat16 fast path is taken: time its twin too
         cases.insert(1, ("mp4, float32 seg", video, False, True))
+    elif bfloat16_supported():  # the probe chose float32: time bfloat16 as the twin
+        cases.insert(1, ("mp4, bfloat16 seg", video, True, True))
     masks_seconds = {}
     for name, path, bfloat16, track in cases:
         kwargs = dict(input=str(path), device=device, refine=False)
@@ -157,6 +170,9 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
     if "mp4, float32 seg" in masks_seconds:
         ratio = masks_seconds["mp4, float32 seg"] / masks_seconds["mp4 alone"]
         print(f"segmenter float32 / bfloat16 (this CPU runs bfloat16 natively): {ratio:.2f}×")
+    elif "mp4, bfloat16 seg" in masks_seconds:
+        ratio = masks_seconds["mp4, bfloat16 seg"] / masks_seconds["mp4 alone"]
+        print(f"segmenter bfloat16 / float32 (the probe took float32 here): {ratio:.2f}×")
     else:
         print("segmenter in float32: this CPU does not run bfloat16 natively")
     out = tmp / "cold"

@@ -56,6 +56,7 @@ from reconphys.pipeline.demo import true_observables
 from reconphys.pipeline.preview import simulate_and_render
 from reconphys.render import render
 from reconphys.render.video import write_image
+from reconphys.threads import set_cpu_threads
 
 FUTURE = slice(20, 30)  # evaluate's future window (frames 20–29)
 
@@ -80,10 +81,10 @@ def main() -> None:
         help="skip the split's first N objects (with --split train: the validation meshes a "
         "model trained on the first N never saw)",
     )
-    parser.add_argument("--threads", type=int, default=2, help="CPU threads (torch)")
+    parser.add_argument("--threads", type=int, default=2, help="CPU threads (torch and Numba)")
     args = parser.parse_args()
     configs = args.configs.split(",")
-    torch.set_num_threads(args.threads)
+    set_cpu_threads(args.threads)  # torch's and Numba's: a second busy thread each otherwise
     root = Path(args.data)
     dataset = DropDataset(root, split=args.split, views=[0])
     if args.after_objects:

@@ -5,6 +5,7 @@ beat), the path a recording takes through load_observation, errors, and train-ma
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -274,6 +275,27 @@ def test_the_bfloat16_fast_path_matches_its_reference(realistic_views):
     default = clip_logits(model, realistic_views[0][0])  # the CPU decides
     chosen = clip_logits(model, realistic_views[0][0], bfloat16=native_bfloat16())
     assert torch.equal(default, chosen)
+
+
+def test_bfloat16_is_chosen_by_a_probe_or_the_environment(monkeypatch):
+    """The precision is the environment's when it says (1 / 0), else the probe's: bfloat16 only
+    where it ran the probe's convolution BFLOAT16_MIN_GAIN times faster; decided once a process."""
+    import reconphys.models.mask_segmenter as segmenter
+
+    for value, expected in (("1", True), ("0", False)):
+        monkeypatch.setenv(segmenter.BFLOAT16_ENV, value)
+        segmenter.native_bfloat16.cache_clear()
+        assert segmenter.native_bfloat16() is expected
+    monkeypatch.delenv(segmenter.BFLOAT16_ENV)
+    gain = segmenter._bfloat16_probe(repeats=1)
+    assert math.isfinite(gain) and gain > 0
+    for probe, expected in ((lambda: 2.0, True), (lambda: 0.5, False)):
+        monkeypatch.setattr(segmenter, "_bfloat16_probe", probe)
+        segmenter.native_bfloat16.cache_clear()
+        supported = bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+        assert segmenter.native_bfloat16() is (expected and supported)
+        assert segmenter.native_bfloat16() is (expected and supported)  # cached
+    segmenter.native_bfloat16.cache_clear()
 
 
 def test_the_shipped_segmenter_averages_its_members_logits(realistic_views):

@@ -17,6 +17,7 @@ its ``.json``): their logits are averaged (``SegmenterEnsemble``).
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -55,15 +56,52 @@ TRACK_MAX_SHARE = 0.6  # a window over this share of the frame: the whole frame 
 OUTSIDE_LOGIT = -20.0  # the logit of a pixel outside its frame's window: background
 
 
+# bfloat16 is taken where a probe runs it at least this much faster than float32 (below)
+BFLOAT16_MIN_GAIN = 1.1
+BFLOAT16_ENV = "RECONPHYS_SEGMENTER_BFLOAT16"  # "1" / "0": take it or not, without the probe
+
+
+@functools.cache
 def native_bfloat16() -> bool:
-    """Whether this CPU runs bfloat16 convolutions natively (oneDNN with AVX-512 BF16 or AMX):
-    where it does not, bfloat16 is emulated and slower than float32."""
+    """Whether the segmenter runs its convolutions in bfloat16 on this CPU: oneDNN must run
+    bfloat16 (AVX-512 BF16 or AMX; elsewhere it is emulated, ~3× slower than float32), and a
+    probe — a 3×3 convolution of the segmenter's widths, timed both ways once per process — must
+    find it :data:`BFLOAT16_MIN_GAIN` times faster: with AVX-512 BF16 but no AMX the segmenter
+    ran 1.34× faster in bfloat16 on an AMD EPYC and 1.36× slower on an Intel Xeon
+    (docs/benchmarks.md), and the flags cannot tell them apart.
+    ``RECONPHYS_SEGMENTER_BFLOAT16`` = 1 / 0 decides instead."""
+    chosen = os.environ.get(BFLOAT16_ENV, "").strip()
+    if chosen in ("0", "1"):
+        return chosen == "1"
     try:
-        return bool(
+        if not (
             torch.backends.mkldnn.is_available() and torch.ops.mkldnn._is_mkldnn_bf16_supported()
-        )
+        ):
+            return False
     except (AttributeError, RuntimeError):  # a build without oneDNN or without the query
         return False
+    return _bfloat16_probe() >= BFLOAT16_MIN_GAIN
+
+
+def _bfloat16_probe(repeats: int = 3) -> float:
+    """float32's time over bfloat16's for a 3×3 convolution, 32 → 32 channels on 8 × 64 × 64
+    (channels last, as the segmenter runs): best of ``repeats`` each after a warm-up."""
+    import time
+
+    conv = nn.Conv2d(32, 32, 3, padding=1).to(memory_format=torch.channels_last)
+    x = torch.randn(8, 32, 64, 64).to(memory_format=torch.channels_last)
+    best = {}
+    with torch.no_grad():
+        for bfloat16 in (False, True):
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bfloat16):
+                conv(x)
+                seconds = []
+                for _ in range(repeats):
+                    started = time.perf_counter()
+                    conv(x)
+                    seconds.append(time.perf_counter() - started)
+            best[bfloat16] = min(seconds)
+    return best[False] / max(best[True], 1e-9)
 
 
 @dataclass(frozen=True)
