@@ -14,7 +14,8 @@ import torch
 from typer.testing import CliRunner
 
 from reconphys.capture import load_observation
-from reconphys.capture.masks import border_is_uniform
+from reconphys.capture.masks import border_is_uniform, subtract_background
+from reconphys.capture.observation import MIN_MAIN_REGION_SHARE, main_region_share
 from reconphys.cli import app
 from reconphys.data import DropDataset, GeneratedDropDataset, make_dataset, make_settings
 from reconphys.errors import InputError
@@ -162,6 +163,20 @@ def test_a_recording_without_masks_or_plate_goes_through_the_segmenter(
     write_mp4(tmp_path / "black.mp4", black, fps=1 / 0.03)
     plain = load_observation(tmp_path / "black.mp4", segment=segment_frames, camera="dataset")
     assert plain.mask_source == "background subtraction (border colour)"
+    assert main_region_share(plain.masks[0]) == 1.0
+    # a one-colour grey border, but a darker floor patch as large as the object beside it: the
+    # border colour's masks are two regions, not one object, so the segmenter reads the clip
+    grey = np.full((30, 32, 32, 3), 120, np.uint8)
+    grey[:, 22:28, 3:13] = 70  # the floor patch, still in every frame
+    grey[:, :, :, 2] += 10  # bluish, as a floor is not the object's colour
+    for t in range(30):
+        grey[t, 4 + t // 3 : 10 + t // 3, 16:22] = (220, 60, 40)
+    write_mp4(tmp_path / "grey.mp4", grey, fps=1 / 0.03)
+    border = subtract_background(torch.from_numpy(grey).float() / 255)
+    object_alone = torch.from_numpy(black[0, ..., 0])
+    assert main_region_share(border[0]) < MIN_MAIN_REGION_SHARE < main_region_share(object_alone)
+    floor = load_observation(tmp_path / "grey.mp4", segment=lambda rgb: border, camera="dataset")
+    assert floor.mask_source.startswith("mask segmenter")
 
 
 def test_the_channels_last_fast_path_matches_its_reference(realistic_views):
