@@ -302,8 +302,12 @@ def test_bfloat16_is_chosen_by_a_probe_or_the_environment(monkeypatch):
         segmenter.native_bfloat16.cache_clear()
         assert segmenter.native_bfloat16() is expected
     monkeypatch.delenv(segmenter.BFLOAT16_ENV)
+    torch.manual_seed(5)
+    expected_draw = torch.rand(3)
+    torch.manual_seed(5)
     gain = segmenter._bfloat16_probe(repeats=1)
     assert math.isfinite(gain) and gain > 0
+    assert torch.equal(torch.rand(3), expected_draw)  # the global random stream is untouched
     for probe, expected in ((lambda: 2.0, True), (lambda: 0.5, False)):
         monkeypatch.setattr(segmenter, "_bfloat16_probe", probe)
         segmenter.native_bfloat16.cache_clear()
