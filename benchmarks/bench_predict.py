@@ -53,7 +53,7 @@ from reconphys.assets.procedural import make_procedural_gaussians
 from reconphys.capture.video import read_video
 from reconphys.errors import InputError
 from reconphys.models.gaussian_shipped import load_gaussian_predictor
-from reconphys.models.mask_segmenter import native_bfloat16, segment_clip
+from reconphys.models.mask_segmenter import bfloat16_supported, native_bfloat16, segment_clip
 from reconphys.physics.anchors import farthest_point_sampling, farthest_point_sampling_reference
 from reconphys.pipeline.predict import predict
 from reconphys.render.video import write_mp4
@@ -112,15 +112,6 @@ class SegmenterClock:
 
     def __exit__(self, *_):
         samples.segment_frames = self._segment
-
-
-def bfloat16_supported() -> bool:
-    """oneDNN runs bfloat16 on this CPU at all (AVX-512 BF16 or AMX; native_bfloat16 also asks
-    its probe whether it is faster than float32 here)."""
-    try:
-        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
-    except (AttributeError, RuntimeError):
-        return False
 
 
 def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:

@@ -91,17 +91,19 @@ def main() -> None:
             out = render(gaussians, cameras)
         rgb = out.rgb  # [V, H, W, 3]
         scores = psnr(rgb, targets)
-        if lit is not None:  # the lit truth's render (rgb [V, H, W, 3], alpha [V, H, W])
-            rows.setdefault(name, {}).setdefault("lit", []).append(
-                float(psnr(rgb, lit[0], lit[1] > 0.5).nanmean())
-            )
         truth = foreground_mask(targets)[1:]  # the unseen views' object pixels
         whole = psnr(rgb[1:], targets[1:], torch.ones_like(truth))
         drawn = out.alpha.reshape(targets.shape[:-1])[1:] > 0.5
         iou = (drawn & truth).sum((-1, -2)) / (drawn | truth).sum((-1, -2)).clamp_min(1)
-        row = rows.setdefault(name, {})
-        for k in ("input", "novel", "all", "cd", "n", "whole", "iou", "deep", "low"):
-            row.setdefault(k, [])
+        row = rows.setdefault(
+            name,
+            {
+                k: []
+                for k in ("input", "novel", "all", "cd", "n", "whole", "iou", "deep", "low", "lit")
+            },
+        )
+        if lit is not None:  # the lit truth's render (rgb [V, H, W, 3], alpha [V, H, W])
+            row["lit"].append(float(psnr(rgb, lit[0], lit[1] > 0.5).nanmean()))
         w2c0 = cameras.world_to_cam[0].to(truth_means)
         row["deep"].append(depth_extent(gaussians.means, w2c0) / depth_extent(truth_means, w2c0))
         row["low"].append(float(gaussians.means[:, 2].min() - truth_means[:, 2].min()))

@@ -73,14 +73,17 @@ def native_bfloat16() -> bool:
     chosen = os.environ.get(BFLOAT16_ENV, "").strip()
     if chosen in ("0", "1"):
         return chosen == "1"
+    return bfloat16_supported() and _bfloat16_probe() >= BFLOAT16_MIN_GAIN
+
+
+def bfloat16_supported() -> bool:
+    """Whether oneDNN runs bfloat16 convolutions on this CPU at all (AVX-512 BF16 or AMX)."""
     try:
-        if not (
+        return bool(
             torch.backends.mkldnn.is_available() and torch.ops.mkldnn._is_mkldnn_bf16_supported()
-        ):
-            return False
+        )
     except (AttributeError, RuntimeError):  # a build without oneDNN or without the query
         return False
-    return _bfloat16_probe() >= BFLOAT16_MIN_GAIN
 
 
 def _bfloat16_probe(repeats: int = 3) -> float:
