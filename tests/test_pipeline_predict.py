@@ -383,6 +383,38 @@ def test_fit_to_mask_recovers_a_displaced_object(dataset):
     assert abs(float(error[0])) < 0.15
 
 
+def _rod(along, length=0.3, radius=0.006, count=120):
+    """Opaque Gaussians on a segment through (0, 0, 0.5) m: a thin part (a robot's leg)."""
+    from reconphys.assets.gaussians import Gaussians
+
+    means = torch.linspace(-0.5, 0.5, count)[:, None] * length * torch.tensor(along)
+    return Gaussians(
+        means=means + torch.tensor([0.0, 0.0, 0.5]),
+        quats=torch.tensor([[1.0, 0.0, 0.0, 0.0]]).repeat(count, 1),
+        log_scales=torch.full((count, 3), math.log(radius)),
+        opacity_logits=torch.full((count,), 4.0),
+        sh0=torch.zeros(count, 3),
+    )
+
+
+def test_a_thin_parts_true_shape_passes_the_placement_check_and_a_turned_one_does_not():
+    from reconphys.capture.placement import silhouette_iou
+    from reconphys.pipeline.predict import MIN_PLACED_IOU
+
+    camera = default_camera(128, 128)  # view 0 looks along −x: y across the image, z up it
+    lying = _rod((0.0, 1.0, 0.0))
+    mask = (render(lying, camera.cameras(), backend="torch").alpha.reshape(128, 128) > 0.5).float()
+    assert 40 < float(mask.sum()) < 200  # a few pixels thick
+    # compared on the whole frame reduced to 64 px its own silhouette scored 0.30 (refused);
+    # on a window around the object it is itself
+    assert silhouette_iou(lying, mask, camera) > 0.95
+    standing = fit_to_mask(_rod((0.0, 0.0, 1.0)), mask, camera)
+    assert silhouette_iou(standing, mask, camera) < MIN_PLACED_IOU
+    # the window follows the Gaussians too: moved off the mask, they do not match it
+    moved = lying.with_means(lying.means + torch.tensor([0.0, 0.4, 0.0]))
+    assert silhouette_iou(moved, mask, camera) < 0.05
+
+
 def _rendered_fall(gaussians, velocity, size=96, frames=4, spin=None):
     """Masks of ``gaussians`` falling freely with ``velocity`` (m/s) and, given, ``spin``
     (rad/s, about their centroid) from frame 0, seen by view 0's default camera."""
@@ -841,11 +873,13 @@ def test_a_geometry_that_does_not_match_frame_0_is_refused(bundle, tmp_path):
     """A mesh or PLY whose silhouette cannot be made to match frame 0's mask (here the object
     squashed into a pancake: 4× wider, 10× flatter) is refused — as given and after moving it
     onto the mask — with no asset, instead of being kept silently."""
+    from reconphys.pipeline.predict import MIN_PLACED_IOU
+
     bad = _hull(bundle, tmp_path, stretch=(4.0, 4.0, 0.1))
     common = [bundle / "video.mp4", "--camera", bundle / "camera.json", "--mesh", bad,
               "--no-refine", "--preview-frames", "0"]  # fmt: skip
     _fails([*common, "--placement", "as-is"], tmp_path, "does not match the object in frame 0")
-    _fails(common, tmp_path, "after moving it onto the mask, needs ≥ 0.6")
+    _fails(common, tmp_path, f"after moving it onto the mask, needs ≥ {MIN_PLACED_IOU}")
     _fails([*common, "--gaussians", bundle / "gaussians.ply"], tmp_path, "not both")
 
 

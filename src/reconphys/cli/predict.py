@@ -88,7 +88,7 @@ def predict_command(
     placement: str = typer.Option(
         "auto",
         help="Given PLY or mesh: auto, as-is or fit (moved onto frame 0's mask); refused when "
-        "its silhouette still does not match the mask (IoU < 0.6).",
+        "its silhouette still does not match the mask (IoU < 0.7 on a window around the object).",
     ),
     ground: str = typer.Option(
         "camera", help="Ground plane: camera (its file's ground_height, else 0) or landed."
