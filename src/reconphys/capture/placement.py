@@ -5,7 +5,7 @@ and the ground, from the camera and the masks alone (no optimisation through the
 - :func:`fit_to_mask`: keep the Gaussians' orientation and size, move them so their rendered
   silhouette covers the first frame's mask box (depth from the apparent size, then the ray
   through the box centre); :func:`silhouette_iou` says how well a placement matches. Both
-  compare silhouettes on a window around the object (:func:`object_window`), not the frame.
+  compare silhouettes on a window around the object (window.comparison_view), not the frame.
 - :func:`linear_velocity_fit`: the free-fall motion of the mask
   centroid over the first frames (before any contact) → a linear velocity in m/s by least squares
   (and its standard error); exactly 0 when the first four frames need none, else read again
@@ -26,6 +26,7 @@ from torch import Tensor
 from ..assets.gaussians import Gaussians
 from ..physics import GRAVITY
 from .camera import CameraSpec
+from .window import comparison_view, pixel_bounds
 
 GRAVITY_MAGNITUDE = -GRAVITY[2]  # m/s², along −z (docs/design.md#conventions)
 # The initial velocity's prior, per component (m/s), against a pixel of mask noise: about the
@@ -139,15 +140,13 @@ WINDOW_MARGIN = 0.15  # the silhouette check's window: the boxes' union, widened
 FIT_WINDOW_MARGIN = 1.0  # fit_to_mask's: the mask's box, widened by its size each way
 
 
-def object_window(
+def _window_around(
     camera: CameraSpec,
     boxes: list[Tensor],  # each [4] (u_min, u_max, v_min, v_max) in pixels
     margin: float,  # the union widened by this share of its longer side each way, + 2 px
-    max_size: int,  # the window reduced to at most this many pixels on its longer side
-) -> tuple[tuple[int, int, int, int], CameraSpec] | None:
-    """The image window around the union of ``boxes`` → ((left, top, width, height) in the
-    camera's pixels, the camera of that window at its reduced size); None when it lies outside
-    the image."""
+) -> tuple[int, int, int, int] | None:
+    """(left, top, width, height) in the camera's pixels of the window around the union of
+    ``boxes`` (inside the image); None when it lies outside the image."""
     u0, v0 = min(float(b[0]) for b in boxes), min(float(b[2]) for b in boxes)
     u1, v1 = max(float(b[1]) for b in boxes), max(float(b[3]) for b in boxes)
     pad = margin * max(u1 - u0, v1 - v0) + 2.0
@@ -156,17 +155,15 @@ def object_window(
     bottom = min(camera.height, math.ceil(v1 + pad))
     if right <= left or bottom <= top:
         return None
-    width, height = right - left, bottom - top
-    scale = min(1.0, max_size / max(width, height))
-    small = camera.cropped(left, top, width, height).resized(
-        max(1, round(width * scale)), max(1, round(height * scale))
-    )
-    return (left, top, width, height), small
+    return left, top, right - left, bottom - top
 
 
-def _extent(mask: Tensor) -> Tensor:  # [4] (u_min, u_max, v_min, v_max): every pixel's edges
-    v, u = torch.nonzero(mask > 0.5, as_tuple=True)
-    return torch.stack([u.min(), u.max() + 1, v.min(), v.max() + 1]).double()
+def _mask_box(mask: Tensor) -> Tensor | None:  # [4] (u_min, u_max, v_min, v_max), pixel edges
+    bounds = pixel_bounds(mask > 0.5)
+    if bounds is None:
+        return None
+    top, bottom, left, right = bounds
+    return torch.tensor([left, right, top, bottom], dtype=torch.float64)
 
 
 def _splats_extent(gaussians: Gaussians, camera: CameraSpec) -> Tensor | None:
@@ -187,14 +184,13 @@ def _splats_extent(gaussians: Gaussians, camera: CameraSpec) -> Tensor | None:
     return torch.stack([u0, u1, v0, v1])
 
 
-def _window_mask(mask: Tensor, window: tuple[int, int, int, int], small: CameraSpec) -> Tensor:
-    """The mask's window area-averaged to the reduced camera's size, thresholded at one half."""
-    import torch.nn.functional as F
-
-    left, top, width, height = window
-    crop = mask[top : top + height, left : left + width].float()
-    size = (small.height, small.width)
-    return (F.interpolate(crop[None, None], size=size, mode="area")[0, 0] > 0.5).float()
+def _windowed(
+    mask: Tensor, camera: CameraSpec, window: tuple[int, int, int, int], max_size: int
+) -> tuple[Tensor, CameraSpec]:
+    """The mask [H, W] cropped to ``window`` and area-averaged to at most ``max_size`` px a side
+    (window.comparison_view), thresholded at one half → ([h, w] in {0, 1}, that camera)."""
+    small_mask, small = comparison_view(mask.float()[None, :, :, None], camera, max_size, window)
+    return (small_mask[0, :, :, 0] > 0.5).float(), small
 
 
 def silhouette_iou(
@@ -205,15 +201,13 @@ def silhouette_iou(
 ) -> float:
     """IoU of the rendered silhouette (alpha > 0.5) and the mask on a window around both (the
     mask's pixels and the Gaussians' projected extent, WINDOW_MARGIN around them)."""
-    boxes = [box for box in (_splats_extent(gaussians, camera),) if box is not None]
-    if bool((mask > 0.5).any()):
-        boxes.append(_extent(mask))
-    found = object_window(camera, boxes, WINDOW_MARGIN, max_size) if boxes else None
-    if found is None:
+    boxes = [b for b in (_splats_extent(gaussians, camera), _mask_box(mask)) if b is not None]
+    window = _window_around(camera, boxes, WINDOW_MARGIN) if boxes else None
+    if window is None:
         return 0.0
-    window, small = found
+    target, small = _windowed(mask, camera, window, max_size)
+    target = target > 0.5
     alpha = rendered_mask(gaussians, small) > 0.5
-    target = _window_mask(mask, window, small) > 0.5
     union = float((alpha | target).sum())
     return float((alpha & target).sum()) / union if union > 0 else 0.0
 
@@ -237,13 +231,11 @@ def fit_to_mask(
     (same orientation and size; the depth follows from the apparent size), on a window around
     the mask (FIT_WINDOW_MARGIN). An empty mask or an empty or off-screen silhouette returns
     the Gaussians unchanged."""
-    if not bool((mask > 0.5).any()):
+    box = _mask_box(mask)
+    window = None if box is None else _window_around(camera, [box], FIT_WINDOW_MARGIN)
+    if window is None:
         return gaussians
-    found = object_window(camera, [_extent(mask)], FIT_WINDOW_MARGIN, max_size)
-    if found is None:
-        return gaussians
-    window, small = found
-    target_mask = _window_mask(mask, window, small)
+    target_mask, small = _windowed(mask, camera, window, max_size)
     if float(target_mask.sum()) == 0:
         return gaussians
     target = mask_box(target_mask)
