@@ -545,6 +545,14 @@ def test_plain_datasets_keep_their_fingerprint_and_scene_is_checked():
     )
     with pytest.raises(InputError, match="--hand-share"):
         make_settings(scene="realistic", hand_share=2)
+    assert (
+        make_settings(scene="realistic", grey_share=0.5).fingerprint()
+        != make_settings(scene="realistic").fingerprint()
+    )
+    with pytest.raises(InputError, match="--grey-share"):
+        make_settings(scene="realistic", grey_share=-1)
+    with pytest.raises(InputError, match="--grey-share"):
+        make_settings(grey_share=0.5)  # the plain look has no such draw
     with pytest.raises(InputError, match="--scene"):
         make_settings(scene="studio")
     with pytest.raises(InputError, match="object_size_range"):
@@ -624,4 +632,35 @@ def test_vivid_share_changes_only_the_look_and_the_asset_carries_its_print(tmp_p
     assert float((stored - canonical).abs().max()) > 0.1
     assert dataset[index]["attributes"].equal(
         GeneratedDropDataset(replace(settings, vivid_share=0.0), device="cpu")[index]["attributes"]
+    )
+
+
+def test_grey_share_makes_only_the_object_grey_and_the_asset_carries_it(tmp_path):
+    """--grey-share draws from a stream of its own: about the share asked of the scenes get a
+    grey object and nothing else of a seed's scene moves; a grey sample's stored Gaussians carry
+    the grey its video shows (each colour's spread about its own grey at most 15 % of the
+    source's), with the same brightness and the same physics."""
+    from reconphys.data.scene import draw_scene
+    from reconphys.render.scene import GREY_MAX_SATURATION
+
+    muted = replace(SMALL, scene="realistic", resolution=32)
+    grey = replace(muted, grey_share=0.5)
+    drawn = [(draw_scene(muted, f"object-{i}", 0), draw_scene(grey, f"object-{i}", 0))
+             for i in range(80)]  # fmt: skip
+    greyed = [b.look.object_saturation < 1 for _, b in drawn]
+    assert 0.3 < np.mean(greyed) < 0.7
+    for a, b in drawn:
+        assert replace(b, look=replace(b.look, object_saturation=1.0)) == a
+    settings = replace(grey, grey_share=1.0, objects=1, test_objects=0)
+    make_dataset(settings, tmp_path / "grey", workers=1, device="cpu")
+    dataset = DropDataset(tmp_path / "grey")
+    saturation = dataset.meta(0)["scene"]["look"]["object_saturation"]
+    assert 0 <= saturation <= GREY_MAX_SATURATION
+    source = dataset.object(0).gaussians.colors.double()
+    stored = dataset.asset(0).gaussians.colors.double()
+    spread = lambda c: (c - c.mean(-1, keepdim=True)).abs()  # noqa: E731
+    assert torch.allclose(spread(stored), saturation * spread(source), atol=1e-5)
+    assert torch.allclose(stored.mean(-1), source.mean(-1), atol=1e-5)
+    assert dataset[0]["attributes"].equal(
+        GeneratedDropDataset(replace(settings, grey_share=0.0), device="cpu")[0]["attributes"]
     )

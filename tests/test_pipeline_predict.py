@@ -415,6 +415,82 @@ def test_a_thin_parts_true_shape_passes_the_placement_check_and_a_turned_one_doe
     assert silhouette_iou(moved, mask, camera) < 0.05
 
 
+def _two_colour_box(colours=((0.9, 0.2, 0.2), (0.2, 0.3, 0.9)), count=10):
+    """Opaque Gaussians filling a 0.2 m cube about (0, 0, 0.5) m, the first colour on its −y
+    half and the second on its +y half (view 0 sees y across the image)."""
+    from reconphys.assets.gaussians import SH_C0, Gaussians
+
+    axis = torch.linspace(-0.1, 0.1, count)
+    means = torch.stack(torch.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    rgb = torch.where(means[:, 1:2] < 0, torch.tensor(colours[0]), torch.tensor(colours[1]))
+    return Gaussians(
+        means=means + torch.tensor([0.0, 0.0, 0.5]),
+        quats=torch.tensor([[1.0, 0.0, 0.0, 0.0]]).repeat(len(means), 1),
+        log_scales=torch.full((len(means), 3), math.log(0.012)),
+        opacity_logits=torch.full((len(means),), 4.0),
+        sh0=(rgb - 0.5) / SH_C0,
+    )
+
+
+def test_a_shape_turned_about_its_symmetry_shows_its_colours_in_the_wrong_place():
+    """The silhouette check cannot see a cube turned half a turn about the vertical; its colours
+    can: the chromaticity of the render and of frame 0 — lit unevenly, with another white
+    balance — correlate for the true pose, anti-correlate for the turned one; one colour, or a
+    frame without colour, cannot tell (None)."""
+    from reconphys.capture.placement import colour_agreement, silhouette_iou
+    from reconphys.geometry import axis_angle_to_matrix
+    from reconphys.pipeline.predict import MIN_COLOUR_AGREEMENT, MIN_PLACED_IOU
+
+    camera = default_camera(64, 64)
+    box = _two_colour_box()
+    drawn = render(box, camera.cameras(), backend="torch")
+    mask = (drawn.alpha.reshape(64, 64) > 0.5).float()
+    light = torch.linspace(0.5, 1.0, 64)[None, :, None]  # brighter to the right
+    frame = drawn.rgb.reshape(64, 64, 3) * light * torch.tensor([1.1, 1.0, 0.85])
+    turn = axis_angle_to_matrix(torch.tensor([0.0, 0.0, math.pi]))
+    centre = box.means.mean(0)
+    turned = box.with_means((box.means - centre) @ turn.T + centre)
+    assert silhouette_iou(turned, mask, camera) > MIN_PLACED_IOU  # the silhouette is the same
+    assert colour_agreement(box, frame, mask, camera) > 0.9
+    assert colour_agreement(turned, frame, mask, camera) < -0.5 < MIN_COLOUR_AGREEMENT
+    plain = _two_colour_box(colours=((0.7, 0.5, 0.3), (0.7, 0.5, 0.3)))
+    assert colour_agreement(plain, frame, mask, camera) is None
+    grey = frame.mean(-1, keepdim=True).expand(-1, -1, 3)
+    assert colour_agreement(box, grey, mask, camera) is None
+
+
+def test_a_shape_whose_colours_agree_is_kept_where_it_is_on_a_poor_mask(tmp_path):
+    """A mask that took in the shadow below the object lowers the true shape's silhouette IoU
+    under MIN_PLACED_IOU; its colours, where the pattern lies, still agree, so --placement auto
+    keeps it where it is (moving it onto the poor mask would move it off) — and the same shape
+    turned half a turn, whose colours do not agree, is refused."""
+    from reconphys.assets.ply import write_ply
+    from reconphys.capture.observation import Observation
+    from reconphys.geometry import axis_angle_to_matrix
+    from reconphys.pipeline.predict import MIN_COLOURED_IOU, MIN_PLACED_IOU, _given_gaussians
+
+    camera = default_camera(64, 64)
+    box = _two_colour_box()
+    drawn = render(box, camera.cameras(), backend="torch")
+    mask = (drawn.alpha.reshape(64, 64) > 0.5).float()
+    rows = torch.nonzero(mask.any(1))[:, 0]
+    low = int(rows.max()) + 1
+    mask[low : low + 8, mask.any(0)] = 1.0  # the shadow's pixels below the box
+    frame = drawn.rgb.reshape(64, 64, 3) * mask[..., None]
+    observation = Observation(frames=frame[None], masks=mask[None], camera=camera, frame_dt=0.03,
+                              source="test", mask_source="test")  # fmt: skip
+    write_ply(tmp_path / "box.ply", box)
+    placed, details = _given_gaussians(tmp_path / "box.ply", observation, "auto")
+    assert MIN_COLOURED_IOU <= details["silhouette_iou_given"] < MIN_PLACED_IOU
+    assert details["placement"] == "as-is" and details["colour_agreement"] > 0.9
+    assert torch.allclose(placed.means, box.means)
+    turn = axis_angle_to_matrix(torch.tensor([0.0, 0.0, math.pi]))
+    centre = box.means.mean(0)
+    write_ply(tmp_path / "turned.ply", box.with_means((box.means - centre) @ turn.T + centre))
+    with pytest.raises(InputError, match=r"its colours do not match|does not match the object"):
+        _given_gaussians(tmp_path / "turned.ply", observation, "auto")
+
+
 def _rendered_fall(gaussians, velocity, size=96, frames=4, spin=None):
     """Masks of ``gaussians`` falling freely with ``velocity`` (m/s) and, given, ``spin``
     (rad/s, about their centroid) from frame 0, seen by view 0's default camera."""
@@ -830,8 +906,9 @@ def _hull(bundle, tmp_path, stretch=(1.0, 1.0, 1.0)):
 
 def test_a_mesh_in_frame_0s_pose_is_used_as_it_is(bundle, tmp_path):
     """predict --mesh: a mesh in frame 0's pose is kept where it is (placement as-is, its
-    silhouette matches); make-asset --keep-pose keeps it where it is too (no centring, scaling,
-    rotation or lifting), while the default puts its lowest point at --height."""
+    silhouette matches; the hull has no colours of its own, and the checker it gets is not
+    compared with frame 0's); make-asset --keep-pose keeps it where it is too (no centring,
+    scaling, rotation or lifting), while the default puts its lowest point at --height."""
     from reconphys.assets.asset import read_asset
 
     hull = _hull(bundle, tmp_path)
@@ -841,7 +918,7 @@ def test_a_mesh_in_frame_0s_pose_is_used_as_it_is(bundle, tmp_path):
     assert result.exit_code == 0, result.output
     details = json.loads((out / "prediction.json").read_text())
     assert details["placement"] == "as-is" and details["silhouette_iou_given"] >= 0.6
-    assert details["geometry"].endswith("(mesh)")
+    assert details["geometry"].endswith("(mesh)") and details["colour_agreement"] is None
     import trimesh
 
     bounds = trimesh.load(hull).bounds
@@ -881,6 +958,33 @@ def test_a_geometry_that_does_not_match_frame_0_is_refused(bundle, tmp_path):
     _fails([*common, "--placement", "as-is"], tmp_path, "does not match the object in frame 0")
     _fails(common, tmp_path, f"after moving it onto the mask, needs ≥ {MIN_PLACED_IOU}")
     _fails([*common, "--gaussians", bundle / "gaussians.ply"], tmp_path, "not both")
+
+
+def test_a_ply_turned_half_a_turn_is_refused_by_its_colours(bundle, tmp_path):
+    """The sample's own PLY turned half a turn about the vertical keeps a silhouette that passes
+    (IoU ≥ MIN_PLACED_IOU) but shows frame 0 the other side of its pattern: refused with one
+    line naming the colours, no asset; the PLY as given is kept, its colours agreeing."""
+    from dataclasses import replace
+
+    from reconphys.assets.ply import read_ply, write_ply
+    from reconphys.geometry import axis_angle_to_matrix, matrix_to_quaternion, quaternion_multiply
+    from reconphys.pipeline.predict import MIN_COLOUR_AGREEMENT
+
+    gaussians = read_ply(bundle / "gaussians.ply")
+    turn = axis_angle_to_matrix(torch.tensor([0.0, 0.0, math.pi]))
+    centre = gaussians.means.mean(0)
+    spun = quaternion_multiply(matrix_to_quaternion(turn).expand_as(gaussians.quats),
+                               gaussians.quats)  # fmt: skip
+    turned = replace(gaussians, means=(gaussians.means - centre) @ turn.T + centre, quats=spun)
+    write_ply(tmp_path / "turned.ply", turned)
+    common = [bundle / "video.mp4", "--camera", bundle / "camera.json", "--no-refine",
+              "--preview-frames", "0"]  # fmt: skip
+    _fails([*common, "--gaussians", tmp_path / "turned.ply"], tmp_path,
+           "its colours do not match the object's in frame 0")  # fmt: skip
+    result, out = _predict([*common, "--gaussians", bundle / "gaussians.ply"], tmp_path)
+    assert result.exit_code == 0, result.output
+    details = json.loads((out / "prediction.json").read_text())
+    assert details["colour_agreement"] >= MIN_COLOUR_AGREEMENT
 
 
 def test_video_without_geometry_or_3dgs_predictor(bundle, tmp_path):

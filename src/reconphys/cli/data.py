@@ -43,6 +43,7 @@ SETTINGS_OPTIONS = {
     "vivid_share": "vivid_share",
     "contrast_share": "contrast_share",
     "hand_share": "hand_share",
+    "grey_share": "grey_share",
     "exposure": "exposure_range_s",
     "readout": "readout_range_s",
 }
@@ -98,6 +99,11 @@ def make_data(
         help="Realistic look only: the share of samples released from a hand in view (a palm, "
         "fingers and a forearm holding the object's top, withdrawn or kept still after the "
         "release; the masks are the object's visible pixels; default 0).",
+    ),
+    grey_share: float = typer.Option(
+        None,
+        help="Realistic look only: the share of samples whose object is grey (its colours kept "
+        "at 0–15 % of their saturation: grey, white or black; default 0).",
     ),
     exposure: float = typer.Option(
         None,

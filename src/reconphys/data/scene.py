@@ -20,7 +20,15 @@ import torch
 from ..assets.gaussians import SH_C0
 from ..render import Cameras, intrinsics_from_fov, look_at
 from ..render.hand import HandSpec, draw_hand
-from ..render.scene import SceneLook, contrast_look, draw_look, print_pattern, vivid_look
+from ..render.scene import (
+    SceneLook,
+    contrast_look,
+    draw_look,
+    grey_colours,
+    grey_look,
+    print_pattern,
+    vivid_look,
+)
 from .objects import CanonicalObject
 from .sampling import sample_seed
 from .settings import DataSettings
@@ -32,6 +40,7 @@ CONTRAST_STREAM = 3  # whether and how its floor is high-contrast (settings.cont
 HAND_STREAM = 4  # whether and how a hand lets the object go (settings.hand_share)
 EXPOSURE_STREAM = 5  # how long the shutter stays open (settings.exposure_range_s)
 READOUT_STREAM = 6  # how long the rows take to read (settings.readout_range_s)
+GREY_STREAM = 7  # whether and how grey the object is (settings.grey_share)
 
 
 @dataclass(frozen=True)
@@ -83,6 +92,10 @@ def draw_scene(settings: DataSettings, object_id: str, sample_index: int) -> Sce
         contrast = np.random.default_rng([seed, CONTRAST_STREAM])
         if contrast.random() < settings.contrast_share:
             look = contrast_look(contrast, look)
+    if settings.grey_share > 0:
+        grey = np.random.default_rng([seed, GREY_STREAM])
+        if grey.random() < settings.grey_share:
+            look = grey_look(grey, look)
     hand = None
     if settings.hand_share > 0:
         held = np.random.default_rng([seed, HAND_STREAM])
@@ -116,13 +129,15 @@ def look_from_dict(data: dict) -> SceneLook:
 
 
 def printed_object(obj: CanonicalObject, look: SceneLook) -> CanonicalObject:
-    """``obj`` with ``look``'s pattern printed on its Gaussians (the vivid look; else as it is):
-    the sample's asset carries the colours its video shows."""
-    if look.object_pattern == "none":
+    """``obj`` with ``look``'s pattern printed on its Gaussians (the vivid look) and its colours
+    made grey (the grey look); else as it is: the sample's asset carries the colours its video
+    shows."""
+    if look.object_pattern == "none" and look.object_saturation == 1.0:
         return obj
     g = obj.gaussians
     generator = torch.Generator().manual_seed(look.texture_seed + 1)
     colours = print_pattern(g.colors.double(), g.means.double(), look, generator)
+    colours = grey_colours(colours, look)
     return replace(obj, gaussians=replace(g, sh0=((colours - 0.5) / SH_C0).to(g.sh0.dtype)))
 
 

@@ -32,6 +32,7 @@ SCENE_FIELDS = (
     "vivid_share",
     "contrast_share",
     "hand_share",
+    "grey_share",
     "exposure_range_s",
     "readout_range_s",
 )
@@ -101,6 +102,10 @@ class DataSettings:
     # forearm holding the object's top at frame 0, withdrawn or kept still after), from a stream
     # of its own; the stored masks are the object's visible pixels
     hand_share: float = 0.0
+    # Share of realistic samples whose object is grey (render/scene.py grey_look: its colours
+    # mixed 85–100 % towards their grey: grey, white or black plastic and metal), from a stream
+    # of its own; meshes bring colourful textures, and a real object often has none
+    grey_share: float = 0.0
     # How long each realistic sample's shutter stays open, seconds, drawn uniformly from this
     # range from a stream of its own (data/scene.py): the object blurred along its motion over
     # that time, centred on the frame's time (data/generate.py shutter_anchors). A phone's video
@@ -135,7 +140,7 @@ class DataSettings:
                 values.pop(name)
         if not self.stretched:  # datasets made before the stretch existed keep theirs
             values.pop("stretch_range")
-        for name in ("vivid_share", "contrast_share", "hand_share"):  # nor before those
+        for name in ("vivid_share", "contrast_share", "hand_share", "grey_share"):  # nor those
             if self.scene != "plain" and not getattr(self, name):
                 values.pop(name)
         for name in ("exposure_range_s", "readout_range_s"):  # nor the shutter's
@@ -238,7 +243,7 @@ class DataSettings:
                     f"({self.frame_dt:g} s): a sensor exposes and reads once a frame",
                     field=f"{flag} ({name})",
                 )
-        for name in ("vivid_share", "contrast_share", "hand_share"):
+        for name in ("vivid_share", "contrast_share", "hand_share", "grey_share"):
             share = getattr(self, name)
             if not (isinstance(share, (int, float)) and 0 <= share <= 1):
                 flag = "--" + name.replace("_", "-")
@@ -248,6 +253,7 @@ class DataSettings:
                 ("--vivid-share", self.vivid_share),
                 ("--contrast-share", self.contrast_share),
                 ("--hand-share", self.hand_share),
+                ("--grey-share", self.grey_share),
                 ("--exposure", max(self.exposure_range_s)),
                 ("--readout", max(self.readout_range_s)),
             ):

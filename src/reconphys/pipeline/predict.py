@@ -38,7 +38,12 @@ from ..capture import Observation
 from ..capture.calibrate import check_touch
 from ..capture.masks import FIRST_FRAMES_AREA_CHANGE, first_frames_area_change
 from ..capture.observation import too_short
-from ..capture.placement import estimate_ground_height, fit_to_mask, silhouette_iou
+from ..capture.placement import (
+    colour_agreement,
+    estimate_ground_height,
+    fit_to_mask,
+    silhouette_iou,
+)
 from ..errors import InputError
 from ..models.gaussian_shipped import (
     LoadedGaussianPredictor,
@@ -140,6 +145,19 @@ def _model_data_settings(predictor) -> dict:
 # A margin below the true geometry's: a correct geometry refused is worse than a wrong one let
 # by (docs/usage.md "The placement check on the object's window").
 MIN_PLACED_IOU = 0.7
+# Where its colours and frame 0's both vary, their chromaticities must correlate at least this
+# much once placed (capture.placement.colour_agreement): a shape turned about an axis it is
+# symmetric about keeps its silhouette but shows another side of its pattern. Chosen on 72
+# realistic validation drops at 128 px: the true Gaussians 0.68–0.97, turned ones at most 0.35
+# (none of those passing the silhouette check let by at any bar from 0.25); a margin below the
+# true ones' (docs/usage.md "The colours of a given shape").
+MIN_COLOUR_AGREEMENT = 0.4
+# A shape whose colours agree (≥ MIN_COLOUR_AGREEMENT) needs only this silhouette IoU: a mask's
+# error (a rim lost, a shadow taken in) costs the silhouette, not where the pattern lies, and
+# moving a shape that is where it should be onto a poor mask moves it off (a motor cover's true
+# Gaussians: IoU 0.66 and colours 0.68 as given; moved 25 cm by the fit, IoU 0.72 and colours
+# −0.09). No turned shape of the validation drops reached 0.4 at any IoU.
+MIN_COLOURED_IOU = 0.5
 # A launch faster than this is not a drop or a toss filmed on a floor (a fall from 5 m lands at
 # 10 m/s): the first frames' masks do not follow the object, or its distance is misread
 MAX_INITIAL_SPEED_M_S = 10.0
@@ -149,12 +167,22 @@ MESH_GAUSSIANS = 4000  # Gaussians sampled from a given mesh (--mesh)
 def _given_gaussians(path: Path, observation: Observation, placement: str, mesh: bool = False):
     """The given geometry (a 3DGS PLY, or a mesh whose coordinates are frame 0's pose in
     metres) placed on frame 0's mask as ``placement`` says; InputError when its silhouette
-    does not match the mask (IoU < MIN_PLACED_IOU): a wrong orientation, shape or size is
-    refused, not kept silently."""
+    does not match the mask (IoU < MIN_PLACED_IOU; < MIN_COLOURED_IOU where its colours agree)
+    or, where both vary, its colours do not match frame 0's (MIN_COLOUR_AGREEMENT): a wrong
+    orientation, shape or size is refused, not kept silently. ``auto`` keeps it where it is when
+    it matches so, else moves it onto the mask (fit_to_mask). A mesh without colours of its own
+    gets a checker, which is not compared."""
+    own_colours = True
     if mesh:
         from ..assets.mesh import mesh_to_gaussians
 
-        gaussians = mesh_to_gaussians(path, MESH_GAUSSIANS, size=None)
+        try:  # the mesh's own colours, even one flat colour (not a checker in its place)
+            gaussians = mesh_to_gaussians(path, MESH_GAUSSIANS, size=None, texture="mesh")
+        except InputError as error:
+            if error.field != "texture":
+                raise
+            gaussians = mesh_to_gaussians(path, MESH_GAUSSIANS, size=None)
+            own_colours = False
     else:
         from ..assets.ply import read_ply
 
@@ -162,19 +190,48 @@ def _given_gaussians(path: Path, observation: Observation, placement: str, mesh:
     if not bool(torch.isfinite(gaussians.means).all()):
         raise InputError("non-finite Gaussian centres", source=str(path), field="means")
     first_mask = observation.masks[0]
+    where = ""  # a shape given with the camera read from the video: in whose world frame
+    if observation.camera_estimate is not None:
+        where = (
+            "; without --camera its pose is read in the estimated camera's world frame (the "
+            "camera on +x looking towards −x, frame 0's centre above the origin): give --camera"
+        )
+    frame = observation.frames[0]
+
+    def colours_of(placed: Gaussians) -> float | None:
+        if not own_colours:
+            return None
+        return colour_agreement(placed, frame, first_mask, observation.camera)
+
+    def matches(iou: float, colours: float | None) -> bool:  # the silhouette, with the colours
+        coloured = colours is not None and colours >= MIN_COLOUR_AGREEMENT
+        return iou >= MIN_PLACED_IOU or (coloured and iou >= MIN_COLOURED_IOU)
+
     iou = silhouette_iou(gaussians, first_mask, observation.camera)
+    colours = colours_of(gaussians)
     how = placement
     if placement == "auto":
-        how = "as-is" if iou >= MIN_PLACED_IOU else "fit"
+        how = "as-is" if matches(iou, colours) else "fit"
+    after = iou
     if how == "fit":
         gaussians = fit_to_mask(gaussians, first_mask, observation.camera)
-    after = silhouette_iou(gaussians, first_mask, observation.camera) if how == "fit" else iou
-    if after < MIN_PLACED_IOU:
+        after = silhouette_iou(gaussians, first_mask, observation.camera)
+        colours = colours_of(gaussians)
+    if not matches(after, colours):
         raise InputError(
             f"does not match the object in frame 0 (silhouette IoU {after:.2f} with its mask "
             f"{'after moving it onto the mask' if how == 'fit' else 'as given'}, needs ≥ "
-            f"{MIN_PLACED_IOU}): give it in frame 0's orientation and real size, or leave it "
-            "out to predict the geometry",
+            f"{MIN_PLACED_IOU}, ≥ {MIN_COLOURED_IOU} where its colours match frame 0's): give "
+            f"it in frame 0's orientation and real size, or leave it out to predict the "
+            f"geometry{where}",
+            source=str(path),
+        )
+    if colours is not None and colours < MIN_COLOUR_AGREEMENT:
+        raise InputError(
+            f"its colours do not match the object's in frame 0 (chromaticity correlation "
+            f"{colours:.2f}, needs ≥ {MIN_COLOUR_AGREEMENT}; the silhouette matches, IoU "
+            f"{after:.2f}): it is turned, or another object; give it in frame 0's "
+            f"orientation, or leave it out to predict the geometry{where}",
             source=str(path),
         )
     # the fit may put it into the ground: lift it onto the ground
@@ -183,6 +240,7 @@ def _given_gaussians(path: Path, observation: Observation, placement: str, mesh:
         "placement": how,
         "silhouette_iou_given": round(iou, 3),
         "silhouette_iou_placed": round(after, 3),
+        "colour_agreement": None if colours is None else round(colours, 3),
     }
 
 

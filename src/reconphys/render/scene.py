@@ -59,6 +59,8 @@ class SceneLook:
     object_colors: tuple[tuple[float, float, float], ...] = ()
     object_period: float = 0.1
     object_mix: float = 0.0
+    # the object's colours mixed towards their grey (grey_look): 1 keeps them, 0 is all grey
+    object_saturation: float = 1.0
 
     def to_dict(self) -> dict:  # JSON-ready (tuples are written as lists)
         return asdict(self)
@@ -140,6 +142,25 @@ def contrast_look(rng: np.random.Generator, look: SceneLook) -> SceneLook:
     if rng.random() < 0.5:
         colours.reverse()
     return replace(look, ground_pattern=pattern, ground_colors=tuple(colours))
+
+
+# A grey object's colours keep at most this share of their difference from their grey
+GREY_MAX_SATURATION = 0.15
+
+
+def grey_look(rng: np.random.Generator, look: SceneLook) -> SceneLook:
+    """``look`` with a grey object (grey, white or black plastic and metal, which the meshes'
+    textures never show): its colours keep 0–GREY_MAX_SATURATION of their saturation. The
+    rest of the scene stays."""
+    return replace(look, object_saturation=float(rng.uniform(0.0, GREY_MAX_SATURATION)))
+
+
+def grey_colours(colours: Tensor, look: SceneLook) -> Tensor:  # [N, 3] → [N, 3] in [0, 1]
+    """Colours mixed towards their grey (the mean of r, g, b) by ``look.object_saturation``."""
+    if look.object_saturation == 1.0:
+        return colours
+    grey = colours.mean(-1, keepdim=True)
+    return grey + look.object_saturation * (colours - grey)
 
 
 def _palette(blend: Tensor, colours: Tensor) -> Tensor:
