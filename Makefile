@@ -118,7 +118,7 @@ gs-model-crop: install
 # mesh left out (configs/masks_held_out.txt), 8000 steps of train-masks. The shipped segmenter is
 # an ensemble of two such networks (2026-11-28): the first's vivid clips have high-contrast floors
 # in half of them, the second's none; then both go on for 1,500 steps with a hand in view
-# (2026-11-28, later; about 40 min for the two).
+# (2026-11-28, later; about 40 min for the two), then for 1,000 with grey objects (2026-12-02).
 masks-model: install
 	$(BIN)/python -m pip install -q -e '.[meshes]'
 	$(BIN)/reconphys make-data --source pybullet --scene realistic --objects 60 \
@@ -164,10 +164,29 @@ masks-model: install
 	        --exclude configs/masks_held_out.txt --init runs/$$m --lr 0.0005 --steps 1500 \
 	        --out runs/$${m}_hand --no-progress || exit 1; \
 	done
-	cp runs/masks_hand/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
-	cp runs/masks_hand/model.json src/reconphys/weights/mask_segmenter.json
-	cp runs/masks_2_hand/model.safetensors src/reconphys/weights/mask_segmenter_2.safetensors
-	cp runs/masks_2_hand/model.json src/reconphys/weights/mask_segmenter_2.json
+	# then both go on with grey objects (docs/usage.md "Grey objects", 2026-12-02): 1,000 steps
+	# from the hand runs on grey drops of pybullet meshes and procedural shapes, 30 pybullet
+	# meshes in colour and the hand/vivid set (about 24 min for the two, one thread each)
+	$(BIN)/reconphys make-data --source pybullet --scene realistic --objects 30 \
+	    --samples-per-object 2 --test-objects 0 --resolution 96 --seed 3 --workers 2 \
+	    --out data/seg_pyb30
+	$(BIN)/reconphys make-data --source pybullet --scene realistic --grey-share 1 \
+	    --vivid-share 0.5 --contrast-share 0.25 --hand-share 0.25 --objects 40 \
+	    --samples-per-object 2 --test-objects 0 --resolution 96 --seed 131 --workers 2 \
+	    --out data/seg_grey_pyb
+	$(BIN)/reconphys make-data --source procedural --scene realistic --grey-share 1 \
+	    --vivid-share 0.5 --hand-share 0.25 --objects 40 --samples-per-object 2 \
+	    --test-objects 0 --resolution 96 --seed 137 --workers 2 --out data/seg_grey_proc
+	for m in masks_hand masks_2_hand; do \
+	    $(BIN)/reconphys train-masks --data data/seg_pyb30 --data data/seg_grey_pyb \
+	        --data data/seg_grey_proc --data data/seg_hand_vivid \
+	        --exclude configs/masks_held_out.txt --init runs/$$m --lr 0.0005 --steps 1000 \
+	        --out runs/$${m}_grey --no-progress || exit 1; \
+	done
+	cp runs/masks_hand_grey/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
+	cp runs/masks_hand_grey/model.json src/reconphys/weights/mask_segmenter.json
+	cp runs/masks_2_hand_grey/model.safetensors src/reconphys/weights/mask_segmenter_2.safetensors
+	cp runs/masks_2_hand_grey/model.json src/reconphys/weights/mask_segmenter_2.json
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache .ruff_cache
