@@ -164,6 +164,7 @@ def test_stretch_leaves_older_datasets_fingerprints_alone():
         "vivid_share",
         "contrast_share",
         "hand_share",
+        "grey_share",
         "exposure_range_s",
         "readout_range_s",
     ):
