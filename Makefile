@@ -158,12 +158,6 @@ masks-model: install
 	$(BIN)/reconphys make-data --source pybullet --scene realistic --hand-share 0.5 \
 	    --vivid-share 1 --contrast-share 0.5 --objects 40 --samples-per-object 2 \
 	    --test-objects 0 --resolution 96 --seed 127 --workers 2 --out data/seg_hand_vivid
-	for m in masks masks_2; do \
-	    $(BIN)/reconphys train-masks --data data/seg_pyb --data data/seg_hand_pyb \
-	        --data data/seg_hand_proc --data data/seg_hand_vivid \
-	        --exclude configs/masks_held_out.txt --init runs/$$m --lr 0.0005 --steps 1500 \
-	        --out runs/$${m}_hand --no-progress || exit 1; \
-	done
 	# then both go on with grey objects (docs/usage.md "Grey objects", 2026-12-02): 1,000 steps
 	# from the hand runs on grey drops of pybullet meshes and procedural shapes, 30 pybullet
 	# meshes in colour and the hand/vivid set (about 24 min for the two, one thread each)
@@ -177,11 +171,15 @@ masks-model: install
 	$(BIN)/reconphys make-data --source procedural --scene realistic --grey-share 1 \
 	    --vivid-share 0.5 --hand-share 0.25 --objects 40 --samples-per-object 2 \
 	    --test-objects 0 --resolution 96 --seed 137 --workers 2 --out data/seg_grey_proc
-	for m in masks_hand masks_2_hand; do \
+	for m in masks masks_2; do \
+	    $(BIN)/reconphys train-masks --data data/seg_pyb --data data/seg_hand_pyb \
+	        --data data/seg_hand_proc --data data/seg_hand_vivid \
+	        --exclude configs/masks_held_out.txt --init runs/$$m --lr 0.0005 --steps 1500 \
+	        --out runs/$${m}_hand --no-progress || exit 1; \
 	    $(BIN)/reconphys train-masks --data data/seg_pyb30 --data data/seg_grey_pyb \
 	        --data data/seg_grey_proc --data data/seg_hand_vivid \
-	        --exclude configs/masks_held_out.txt --init runs/$$m --lr 0.0005 --steps 1000 \
-	        --out runs/$${m}_grey --no-progress || exit 1; \
+	        --exclude configs/masks_held_out.txt --init runs/$${m}_hand --lr 0.0005 \
+	        --steps 1000 --out runs/$${m}_hand_grey --no-progress || exit 1; \
 	done
 	cp runs/masks_hand_grey/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
 	cp runs/masks_hand_grey/model.json src/reconphys/weights/mask_segmenter.json

@@ -32,11 +32,16 @@ import numpy as np
 import torch
 
 from reconphys.capture.camera import CameraSpec
-from reconphys.capture.placement import colour_agreement, fit_to_mask, silhouette_iou
+from reconphys.capture.placement import fit_to_mask, placement_scores
 from reconphys.data import DropDataset
 from reconphys.geometry import axis_angle_to_matrix, matrix_to_quaternion, quaternion_multiply
 from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, segment_clip
-from reconphys.pipeline.predict import MIN_COLOUR_AGREEMENT, MIN_COLOURED_IOU, MIN_PLACED_IOU
+from reconphys.pipeline.predict import (
+    MIN_COLOUR_AGREEMENT,
+    MIN_COLOURED_IOU,
+    MIN_PLACED_IOU,
+    placement_matches,
+)
 
 TURNS = {  # name → (axis, angle in radians), about the Gaussians' centre
     "x90": ((1.0, 0.0, 0.0), math.pi / 2),
@@ -57,20 +62,17 @@ def turned(gaussians, axis, angle):
 
 
 def scores(gaussians, frame, mask, camera) -> dict:
-    return {
-        "iou": silhouette_iou(gaussians, mask, camera),
-        "colour": colour_agreement(gaussians, frame, mask, camera),
-    }
+    iou, colour = placement_scores(gaussians, mask, camera, frame)
+    return {"iou": iou, "colour": colour}
 
 
 def matches(score: dict, colours: bool) -> bool:
-    """predict's rule (_given_gaussians); without ``colours``, the silhouette's alone."""
+    """predict's rule (placement_matches, and the colours where judged); without ``colours``,
+    the silhouette's alone."""
     if not colours:
         return score["iou"] >= MIN_PLACED_IOU
-    agree = score["colour"] is not None and score["colour"] >= MIN_COLOUR_AGREEMENT
-    if score["iou"] < MIN_PLACED_IOU and not (agree and score["iou"] >= MIN_COLOURED_IOU):
-        return False
-    return score["colour"] is None or agree
+    agree = score["colour"] is None or score["colour"] >= MIN_COLOUR_AGREEMENT
+    return placement_matches(score["iou"], score["colour"]) and agree
 
 
 def kept(row: dict, colours: bool = True) -> bool:
@@ -83,7 +85,7 @@ def placed(gaussians, frame, mask, camera) -> dict:
     fitted = fit_to_mask(gaussians, mask, camera)
     return {
         "given": scores(gaussians, frame, mask, camera),
-        **{"fitted": scores(fitted, frame, mask, camera)},
+        "fitted": scores(fitted, frame, mask, camera),
     }
 
 

@@ -211,14 +211,7 @@ def silhouette_iou(
 ) -> float:
     """IoU of the rendered silhouette (alpha > 0.5) and the mask on a window around both (the
     mask's pixels and the Gaussians' projected extent, WINDOW_MARGIN around them)."""
-    window = _comparison_window(gaussians, mask, camera)
-    if window is None:
-        return 0.0
-    target, small = _windowed(mask, camera, window, max_size)
-    target = target > 0.5
-    alpha = rendered_mask(gaussians, small) > 0.5
-    union = float((alpha | target).sum())
-    return float((alpha & target).sum()) / union if union > 0 else 0.0
+    return placement_scores(gaussians, mask, camera, max_size=max_size)[0]
 
 
 # Colours are compared by their chromaticity (r, g, b over their sum): the light's brightness,
@@ -252,28 +245,44 @@ def colour_agreement(
     chromaticity varies by less than MIN_CHROMA_SPREAD (one colour, greys only, or colours the
     video does not resolve: H.264 keeps colour at half the resolution) or fewer than
     MIN_COLOUR_PIXELS pixels are shared."""
+    return placement_scores(gaussians, mask, camera, frame, max_size)[1]
+
+
+def placement_scores(
+    gaussians: Gaussians,
+    mask: Tensor,  # [H, W] frame 0's object mask
+    camera: CameraSpec,
+    frame: Tensor | None = None,  # [H, W, 3] in [0, 1]: frame 0; None: no colours compared
+    max_size: int = 64,
+) -> tuple[float, float | None]:
+    """(:func:`silhouette_iou`, :func:`colour_agreement`) from one render of the window; the
+    colours None without ``frame``. (0, None) when the window is off the image."""
     window = _comparison_window(gaussians, mask, camera)
     if window is None:
-        return None
+        return 0.0, None
     target, small = _windowed(mask, camera, window, max_size)
-    seen, _ = comparison_view(frame.float()[None], camera, max_size, window)
+    target = target > 0.5
     from ..render import render
 
     with torch.no_grad():
         drawn = render(gaussians.map(lambda t: t.float()), small.cameras(), backend="torch")
     alpha = drawn.alpha.reshape(small.height, small.width)
-    shared = (alpha > 0.5) & (target > 0.5)
-    if int(shared.sum()) < MIN_COLOUR_PIXELS:
-        return None
+    silhouette = alpha > 0.5
+    union = float((silhouette | target).sum())
+    iou = float((silhouette & target).sum()) / union if union > 0 else 0.0
+    shared = silhouette & target
+    if frame is None or int(shared.sum()) < MIN_COLOUR_PIXELS:
+        return iou, None
+    seen, _ = comparison_view(frame.float()[None], camera, max_size, window)
     colours = drawn.rgb.reshape(small.height, small.width, 3)[shared] / alpha[shared, None]
     drawn_chroma = chromaticity(colours.double())  # [P, 3]
     seen_chroma = chromaticity(seen[0][shared].double())
     if min(float(c.std(0).mean()) for c in (drawn_chroma, seen_chroma)) < MIN_CHROMA_SPREAD:
-        return None
+        return iou, None
     x = drawn_chroma - drawn_chroma.mean(0)
     y = seen_chroma - seen_chroma.mean(0)
     scale = float(((x**2).sum() * (y**2).sum()).sqrt())
-    return float((x * y).sum()) / scale if scale > 0 else 0.0
+    return iou, float((x * y).sum()) / scale if scale > 0 else 0.0
 
 
 def rendered_mask(gaussians: Gaussians, camera: CameraSpec) -> Tensor:  # [H, W] alpha > 0.5

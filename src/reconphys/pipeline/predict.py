@@ -38,12 +38,7 @@ from ..capture import Observation
 from ..capture.calibrate import check_touch
 from ..capture.masks import FIRST_FRAMES_AREA_CHANGE, first_frames_area_change
 from ..capture.observation import too_short
-from ..capture.placement import (
-    colour_agreement,
-    estimate_ground_height,
-    fit_to_mask,
-    silhouette_iou,
-)
+from ..capture.placement import estimate_ground_height, fit_to_mask, placement_scores
 from ..errors import InputError
 from ..models.gaussian_shipped import (
     LoadedGaussianPredictor,
@@ -164,6 +159,14 @@ MAX_INITIAL_SPEED_M_S = 10.0
 MESH_GAUSSIANS = 4000  # Gaussians sampled from a given mesh (--mesh)
 
 
+def placement_matches(iou: float, colours: float | None) -> bool:
+    """Whether a placed shape's silhouette matches frame 0's mask: IoU ≥ MIN_PLACED_IOU, or ≥
+    MIN_COLOURED_IOU where its colours agree (≥ MIN_COLOUR_AGREEMENT; None: not judged). Its
+    colours, where judged, must agree as well (checked apart, for its own message)."""
+    coloured = colours is not None and colours >= MIN_COLOUR_AGREEMENT
+    return iou >= MIN_PLACED_IOU or (coloured and iou >= MIN_COLOURED_IOU)
+
+
 def _given_gaussians(path: Path, observation: Observation, placement: str, mesh: bool = False):
     """The given geometry (a 3DGS PLY, or a mesh whose coordinates are frame 0's pose in
     metres) placed on frame 0's mask as ``placement`` says; InputError when its silhouette
@@ -196,28 +199,16 @@ def _given_gaussians(path: Path, observation: Observation, placement: str, mesh:
             "; without --camera its pose is read in the estimated camera's world frame (the "
             "camera on +x looking towards −x, frame 0's centre above the origin): give --camera"
         )
-    frame = observation.frames[0]
-
-    def colours_of(placed: Gaussians) -> float | None:
-        if not own_colours:
-            return None
-        return colour_agreement(placed, frame, first_mask, observation.camera)
-
-    def matches(iou: float, colours: float | None) -> bool:  # the silhouette, with the colours
-        coloured = colours is not None and colours >= MIN_COLOUR_AGREEMENT
-        return iou >= MIN_PLACED_IOU or (coloured and iou >= MIN_COLOURED_IOU)
-
-    iou = silhouette_iou(gaussians, first_mask, observation.camera)
-    colours = colours_of(gaussians)
+    frame = observation.frames[0] if own_colours else None  # a checker is not compared
+    iou, colours = placement_scores(gaussians, first_mask, observation.camera, frame)
     how = placement
     if placement == "auto":
-        how = "as-is" if matches(iou, colours) else "fit"
+        how = "as-is" if placement_matches(iou, colours) else "fit"
     after = iou
     if how == "fit":
         gaussians = fit_to_mask(gaussians, first_mask, observation.camera)
-        after = silhouette_iou(gaussians, first_mask, observation.camera)
-        colours = colours_of(gaussians)
-    if not matches(after, colours):
+        after, colours = placement_scores(gaussians, first_mask, observation.camera, frame)
+    if not placement_matches(after, colours):
         raise InputError(
             f"does not match the object in frame 0 (silhouette IoU {after:.2f} with its mask "
             f"{'after moving it onto the mask' if how == 'fit' else 'as given'}, needs ≥ "
