@@ -158,9 +158,10 @@ masks-model: install
 	$(BIN)/reconphys make-data --source pybullet --scene realistic --hand-share 0.5 \
 	    --vivid-share 1 --contrast-share 0.5 --objects 40 --samples-per-object 2 \
 	    --test-objects 0 --resolution 96 --seed 127 --workers 2 --out data/seg_hand_vivid
-	# then both go on with grey objects (docs/usage.md "Grey objects", 2026-12-02): 1,000 steps
-	# from the hand runs on grey drops of pybullet meshes and procedural shapes, 30 pybullet
-	# meshes in colour and the hand/vivid set (about 24 min for the two, one thread each)
+	# then both go on with grey objects (docs/usage.md "Grey objects", 2026-12-02; their
+	# lightness drawn black to white since 2026-12-03): 1,000 steps from the hand runs on grey
+	# drops of pybullet meshes and procedural shapes, 30 pybullet meshes in colour and the
+	# hand/vivid set (about 24 min for the two, one thread each)
 	$(BIN)/reconphys make-data --source pybullet --scene realistic --objects 30 \
 	    --samples-per-object 2 --test-objects 0 --resolution 96 --seed 3 --workers 2 \
 	    --out data/seg_pyb30

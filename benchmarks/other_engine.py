@@ -612,7 +612,12 @@ def main() -> None:
         action="store_true",
         help="predict's default path (the physics fitted to the recording), not --no-refine",
     )
-    read.add_argument("--segmenter", default=None, help="weights (default: the shipped ones)")
+    read.add_argument(
+        "--segmenter",
+        nargs="+",
+        default=None,
+        help="weights: one file, or several averaged (default: the shipped ensemble)",
+    )
     read.add_argument("--json", default=None, help="write the per-clip rows here")
     args = parser.parse_args()
     render(args) if args.command == "render" else measure(args)

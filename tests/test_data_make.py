@@ -639,9 +639,10 @@ def test_grey_share_makes_only_the_object_grey_and_the_asset_carries_it(tmp_path
     """--grey-share draws from a stream of its own: about the share asked of the scenes get a
     grey object and nothing else of a seed's scene moves; a grey sample's stored Gaussians carry
     the grey its video shows (each colour's spread about its own grey at most 15 % of the
-    source's), with the same brightness and the same physics."""
+    source's), its mean grey moved to the drawn lightness (the pattern's shades kept but where
+    clipped at black or white), and the same physics."""
     from reconphys.data.scene import draw_scene
-    from reconphys.render.scene import GREY_MAX_SATURATION
+    from reconphys.render.scene import GREY_LIGHTNESS_RANGE, GREY_MAX_SATURATION
 
     muted = replace(SMALL, scene="realistic", resolution=32)
     grey = replace(muted, grey_share=0.5)
@@ -650,17 +651,26 @@ def test_grey_share_makes_only_the_object_grey_and_the_asset_carries_it(tmp_path
     greyed = [b.look.object_saturation < 1 for _, b in drawn]
     assert 0.3 < np.mean(greyed) < 0.7
     for a, b in drawn:
-        assert replace(b, look=replace(b.look, object_saturation=1.0)) == a
+        kept = replace(b.look, object_saturation=1.0, object_lightness=None)
+        assert replace(b, look=kept) == a
+    lightness = [b.look.object_lightness for _, b in drawn if b.look.object_saturation < 1]
+    assert min(lightness) < 0.3 and max(lightness) > 0.7  # black to white, not the texture's
+    assert GREY_LIGHTNESS_RANGE[0] <= min(lightness) <= max(lightness) <= GREY_LIGHTNESS_RANGE[1]
     settings = replace(grey, grey_share=1.0, objects=1, test_objects=0)
     make_dataset(settings, tmp_path / "grey", workers=1, device="cpu")
     dataset = DropDataset(tmp_path / "grey")
-    saturation = dataset.meta(0)["scene"]["look"]["object_saturation"]
+    look = dataset.meta(0)["scene"]["look"]
+    saturation, lightness = look["object_saturation"], look["object_lightness"]
     assert 0 <= saturation <= GREY_MAX_SATURATION
     source = dataset.object(0).gaussians.colors.double()
     stored = dataset.asset(0).gaussians.colors.double()
+    inside = ((stored > 1e-4) & (stored < 1 - 1e-4)).all(-1)  # [N] not clipped
+    assert inside.float().mean() > 0.5
     spread = lambda c: (c - c.mean(-1, keepdim=True)).abs()  # noqa: E731
-    assert torch.allclose(spread(stored), saturation * spread(source), atol=1e-5)
-    assert torch.allclose(stored.mean(-1), source.mean(-1), atol=1e-5)
+    assert torch.allclose(spread(stored)[inside], saturation * spread(source)[inside], atol=1e-5)
+    shift = lightness - float(source.mean())  # the source's mean grey → the drawn lightness
+    assert torch.allclose(stored.mean(-1)[inside], source.mean(-1)[inside] + shift, atol=1e-5)
+    assert abs(shift) > 1e-3
     assert dataset[0]["attributes"].equal(
         GeneratedDropDataset(replace(settings, grey_share=0.0), device="cpu")[0]["attributes"]
     )

@@ -132,7 +132,8 @@ def printed_object(obj: CanonicalObject, look: SceneLook) -> CanonicalObject:
     """``obj`` with ``look``'s pattern printed on its Gaussians (the vivid look) and its colours
     made grey (the grey look); else as it is: the sample's asset carries the colours its video
     shows."""
-    if look.object_pattern == "none" and look.object_saturation == 1.0:
+    unchanged = look.object_saturation == 1.0 and look.object_lightness is None
+    if look.object_pattern == "none" and unchanged:
         return obj
     g = obj.gaussians
     generator = torch.Generator().manual_seed(look.texture_seed + 1)

@@ -61,6 +61,8 @@ class SceneLook:
     object_mix: float = 0.0
     # the object's colours mixed towards their grey (grey_look): 1 keeps them, 0 is all grey
     object_saturation: float = 1.0
+    # the grey object's mean grey moved to this (grey_look: white to black); None keeps its own
+    object_lightness: float | None = None
 
     def to_dict(self) -> dict:  # JSON-ready (tuples are written as lists)
         return asdict(self)
@@ -146,21 +148,31 @@ def contrast_look(rng: np.random.Generator, look: SceneLook) -> SceneLook:
 
 # A grey object's colours keep at most this share of their difference from their grey
 GREY_MAX_SATURATION = 0.15
+# and its mean grey is drawn from this range: black to white plastic (the meshes' textures are
+# mostly mid to dark, 0.2–0.5; a white object was missed whole by a segmenter that had seen none)
+GREY_LIGHTNESS_RANGE = (0.05, 0.95)
 
 
 def grey_look(rng: np.random.Generator, look: SceneLook) -> SceneLook:
     """``look`` with a grey object (grey, white or black plastic and metal, which the meshes'
-    textures never show): its colours keep 0–GREY_MAX_SATURATION of their saturation. The
-    rest of the scene stays."""
-    return replace(look, object_saturation=float(rng.uniform(0.0, GREY_MAX_SATURATION)))
+    textures never show): its colours keep 0–GREY_MAX_SATURATION of their saturation, their
+    mean grey drawn from GREY_LIGHTNESS_RANGE. The rest of the scene stays."""
+    saturation = float(rng.uniform(0.0, GREY_MAX_SATURATION))
+    lightness = float(rng.uniform(*GREY_LIGHTNESS_RANGE))
+    return replace(look, object_saturation=saturation, object_lightness=lightness)
 
 
 def grey_colours(colours: Tensor, look: SceneLook) -> Tensor:  # [N, 3] → [N, 3] in [0, 1]
-    """Colours mixed towards their grey (the mean of r, g, b) by ``look.object_saturation``."""
-    if look.object_saturation == 1.0:
+    """Colours mixed towards their grey (the mean of r, g, b) by ``look.object_saturation``,
+    then shifted so that their mean grey is ``look.object_lightness`` (where given; clipped to
+    [0, 1], so a texture's pattern survives but for its extremes)."""
+    if look.object_saturation == 1.0 and look.object_lightness is None:
         return colours
     grey = colours.mean(-1, keepdim=True)
-    return grey + look.object_saturation * (colours - grey)
+    mixed = grey + look.object_saturation * (colours - grey)
+    if look.object_lightness is None:
+        return mixed
+    return (mixed + (look.object_lightness - grey.mean())).clamp(0.0, 1.0)
 
 
 def _palette(blend: Tensor, colours: Tensor) -> Tensor:
