@@ -118,7 +118,8 @@ gs-model-crop: install
 # mesh left out (configs/masks_held_out.txt), 8000 steps of train-masks. The shipped segmenter is
 # an ensemble of two such networks (2026-11-28): the first's vivid clips have high-contrast floors
 # in half of them, the second's none; then both go on for 1,500 steps with a hand in view
-# (2026-11-28, later; about 40 min for the two), then for 1,000 with grey objects (2026-12-02).
+# (2026-11-28, later; about 40 min for the two), then for 1,000 with grey objects (2026-12-02);
+# the first for 1,000 more with pybullet's renders beside them (2026-12-03).
 masks-model: install
 	$(BIN)/python -m pip install -q -e '.[meshes]'
 	$(BIN)/reconphys make-data --source pybullet --scene realistic --objects 60 \
@@ -182,8 +183,22 @@ masks-model: install
 	        --exclude configs/masks_held_out.txt --init runs/$${m}_hand --lr 0.0005 \
 	        --steps 1000 --out runs/$${m}_hand_grey --no-progress || exit 1; \
 	done
-	cp runs/masks_hand_grey/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
-	cp runs/masks_hand_grey/model.json src/reconphys/weights/mask_segmenter.json
+	# then the first member goes on with another engine's look (docs/usage.md "Another engine's
+	# look in training", 2026-12-03): 1,000 steps from its grey run on the same mix and 400
+	# pybullet drops of wheel meshes none held out, on three of the five floor/wall textures
+	# (about 15 min for the renders, 15 for the training, one thread each)
+	for s in 139 149; do \
+	    $(BIN)/python benchmarks/other_engine.py render data/seg_engine_$$s --clips 200 \
+	        --training-meshes 200 --seed $$s \
+	        --textures checker_blue.png,checker_grid.jpg,tex256.png || exit 1; \
+	done
+	$(BIN)/reconphys train-masks --data data/seg_pyb30 --data data/seg_grey_pyb \
+	    --data data/seg_grey_proc --data data/seg_hand_vivid --data data/seg_engine_139 \
+	    --data data/seg_engine_149 --exclude configs/masks_held_out.txt \
+	    --init runs/masks_hand_grey --lr 0.0005 --steps 1000 --out runs/masks_hand_grey_engine \
+	    --no-progress
+	cp runs/masks_hand_grey_engine/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
+	cp runs/masks_hand_grey_engine/model.json src/reconphys/weights/mask_segmenter.json
 	cp runs/masks_2_hand_grey/model.safetensors src/reconphys/weights/mask_segmenter_2.safetensors
 	cp runs/masks_2_hand_grey/model.json src/reconphys/weights/mask_segmenter_2.json
 

@@ -72,6 +72,23 @@ TEST_MESHES = "data/pyb"  # its test split's meshes: held out of every network's
 TEXTURES = ("checker_blue.png", "checker_grid.jpg", "tex256.png", "uvmap.png", "cube.png")
 
 
+def _training_meshes(count: int, exclude: list[str], seed: int) -> list[str]:
+    """``count`` of the wheel's ``random_urdfs`` meshes drawn by ``seed``, none that an
+    ``exclude`` entry names (train-masks' ``--exclude``: a list file or a dataset's test split):
+    drops for training the segmenter on another engine's look, its held-out meshes kept out."""
+    import pybullet_data
+
+    from reconphys.assets.mesh import pybullet_mesh_paths
+    from reconphys.train.masks import held_out_meshes
+
+    root = Path(pybullet_data.getDataPath())
+    held_out = set().union(*map(held_out_meshes, exclude))
+    names = [str(m.relative_to(root)) for m in pybullet_mesh_paths()]
+    names = [n for n in names if n.startswith("random_urdfs/") and n not in held_out]
+    rng = np.random.default_rng([seed, 1])
+    return [names[i] for i in sorted(rng.choice(len(names), min(count, len(names)), False))]
+
+
 def _test_meshes(data: str) -> list[str]:
     """The pybullet meshes of dataset ``data``'s test split."""
     manifest = json.loads((Path(data) / "manifest.json").read_text())
@@ -102,7 +119,13 @@ def _soft_vertices(p, body: int) -> np.ndarray:  # [N, 3] a deformable body's no
 
 
 def _render_clip(
-    p, rng: np.random.Generator, mesh: str, width: int, height: int, soft: bool = False
+    p,
+    rng: np.random.Generator,
+    mesh: str,
+    width: int,
+    height: int,
+    soft: bool = False,
+    textures: tuple[str, ...] = TEXTURES,
 ) -> dict | None:
     """One drop; None when the object leaves the frame or touches its border (drawn again).
     ``soft``: the mesh as pybullet's mass-spring deformable body (a spring on every edge and
@@ -121,7 +144,7 @@ def _render_clip(
     p.setGravity(0, 0, -9.81)
     p.setTimeStep(FRAME_DT / substeps)
     plane = p.loadURDF(str(data / "plane.urdf"))
-    look = {"floor": TEXTURES[rng.integers(len(TEXTURES))], "wall": None, "object": None}
+    look = {"floor": textures[rng.integers(len(textures))], "wall": None, "object": None}
     floor_texture = p.loadTexture(str(data / look["floor"]))
     p.changeVisualShape(
         plane, -1, textureUniqueId=floor_texture, rgbaColor=[*rng.uniform(0.5, 1.0, 3), 1]
@@ -236,11 +259,11 @@ def _render_clip(
         baseOrientation=p.getQuaternionFromEuler([0, 0, azimuth]),
     )
     if rng.random() < 0.7:
-        look["wall"] = TEXTURES[rng.integers(len(TEXTURES))]
+        look["wall"] = textures[rng.integers(len(textures))]
         wall_texture = p.loadTexture(str(data / look["wall"]))
         p.changeVisualShape(wall, -1, textureUniqueId=wall_texture)
     if rng.random() < 0.5:  # the mesh's own colour, else a texture on it
-        look["object"] = TEXTURES[rng.integers(len(TEXTURES))]
+        look["object"] = textures[rng.integers(len(textures))]
         object_texture = p.loadTexture(str(data / look["object"]))
         p.changeVisualShape(body, -1, textureUniqueId=object_texture)
 
@@ -331,7 +354,15 @@ def render(args) -> None:
     width, height = (int(x) for x in args.size.split("x"))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    meshes = list(SOFT_MESHES) if args.soft else _test_meshes(args.meshes)
+    textures = tuple(args.textures.split(",")) if args.textures else TEXTURES
+    if not set(textures) <= set(TEXTURES):
+        raise SystemExit(f"--textures: each one of {', '.join(TEXTURES)}")
+    if args.soft:
+        meshes = list(SOFT_MESHES)
+    elif args.training_meshes:
+        meshes = _training_meshes(args.training_meshes, args.exclude, args.seed)
+    else:
+        meshes = _test_meshes(args.meshes)
     rng = np.random.default_rng(args.seed)
     client = p.connect(p.DIRECT)
     written, tries = 0, 0
@@ -340,7 +371,14 @@ def render(args) -> None:
         while written < args.clips:
             tries += 1
             mesh = meshes[written % len(meshes)]
-            clip = _render_clip(p, rng, mesh, width, height, args.soft)
+            try:
+                clip = _render_clip(p, rng, mesh, width, height, args.soft, textures)
+            except Exception as e:  # a broken mesh of the wheel's (random_urdfs/168 is one)
+                if not args.training_meshes:
+                    raise
+                print(f"{mesh}: {e}; dropped", flush=True)
+                meshes.remove(mesh)
+                continue
             if clip is None:
                 continue
             folder = out / f"{written:04d}"
@@ -597,6 +635,24 @@ def main() -> None:
         default=TEST_MESHES,
         help="a pybullet dataset whose test split's meshes to drop (default: data/pyb's, held "
         "out of every network; a validation set's to choose a setting)",
+    )
+    make.add_argument(
+        "--training-meshes",
+        type=int,
+        default=0,
+        help="drop this many of the wheel's meshes instead, none of --exclude's (training "
+        "clips for train-masks)",
+    )
+    make.add_argument(
+        "--exclude",
+        nargs="+",
+        default=["configs/masks_held_out.txt"],
+        help="with --training-meshes: meshes never drawn (a list file or a dataset's test split)",
+    )
+    make.add_argument(
+        "--textures",
+        default="",
+        help=f"comma-separated images for the floor, wall and object (default all: {TEXTURES})",
     )
     read = commands.add_parser("measure", help="read the clips as predict does")
     read.add_argument("out")

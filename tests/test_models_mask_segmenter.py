@@ -43,6 +43,7 @@ from reconphys.train.masks import (
     _Clip,
     held_out_meshes,
     load_clips,
+    recording_clips,
 )
 
 runner = CliRunner()
@@ -427,6 +428,56 @@ def test_load_clips_reads_some_views_and_leaves_held_out_meshes_out(tmp_path):
     assert held_out_meshes(str(listed)) == {stored.samples[1]["object"]}
     kept = load_clips((str(data),), "test", exclude=(str(listed),))
     assert len(kept) == 4 and torch.equal(kept[0].masks, stored.masks(0)[0])
+
+
+def _recording(folder, masks: np.ndarray, mesh: str) -> None:
+    """A recording with its true masks as benchmarks/other_engine.py writes one: a dark frame,
+    the object a bright square."""
+    folder.mkdir(parents=True)
+    frames = np.where(masks[..., None], 220, 30).astype(np.uint8).repeat(3, -1)
+    write_mp4(folder / "video.mp4", frames, fps=30)
+    np.savez_compressed(folder / "masks.npz", masks=masks)
+    (folder / "truth.json").write_text(json.dumps({"object": mesh}))
+
+
+def test_recordings_with_masks_are_training_clips(tmp_path):
+    """train-masks --data DIR of recordings (NNNN/video.mp4 + masks.npz, another engine's
+    renders): each one clip, its frames the video's and its masks the stored ones; a held-out
+    mesh's left out; masks that do not match the video and a folder of neither kind refused."""
+    masks = np.zeros((4, 16, 16), bool)
+    for t in range(4):
+        masks[t, 2 + 2 * t : 6 + 2 * t, 5:9] = True  # falling
+    root = tmp_path / "engine"
+    _recording(root / "0000", masks, "random_urdfs/001/001.obj")
+    _recording(root / "0001", masks[:, ::-1].copy(), "random_urdfs/002/002.obj")
+    clips = recording_clips(str(root))
+    assert len(clips) == 2 and clips[0].frames.shape == (4, 16, 16, 3)
+    assert torch.equal(clips[0].masks, torch.from_numpy(masks))
+    inside = clips[0].frames[torch.from_numpy(masks)].float().mean()
+    assert inside > 180 and clips[0].frames[torch.from_numpy(~masks)].float().mean() < 60
+    assert torch.allclose(
+        clips[0].references[0], clips[0].frames[:2].float().mean(0).permute(2, 0, 1) / 255
+    )
+    listed = tmp_path / "held_out.txt"
+    listed.write_text("random_urdfs/001/001.obj\n")
+    kept = load_clips((str(root),), exclude=(str(listed),))
+    assert len(kept) == 1 and torch.equal(kept[0].masks, torch.from_numpy(masks[:, ::-1].copy()))
+    np.savez_compressed(root / "0001" / "masks.npz", masks=masks[:3])
+    with pytest.raises(InputError, match="do not match the video"):
+        recording_clips(str(root))
+    with pytest.raises(InputError, match="neither a dataset"):
+        load_clips((str(tmp_path / "nothing"),))
+    (root / "0001" / "masks.npz").write_bytes(b"not a zip")
+    with pytest.raises(InputError, match=r"masks\.npz"):
+        recording_clips(str(root))
+    other = tmp_path / "engine2"
+    _recording(other / "0000", masks, "random_urdfs/003/003.obj")
+    out = tmp_path / "run"
+    command = ["train-masks", "--data", str(other), "--out", str(out), "--steps", "2"]
+    command += ["--batch-size", "2", "--crop", "16", "--threads", "1", "--no-progress"]
+    result = runner.invoke(app, [*command, "--channels", "8,12"])
+    assert result.exit_code == 0, result.output
+    assert load_mask_segmenter(out)(torch.zeros(1, 16, 16, 16)).shape == (1, 16, 16)
 
 
 def test_a_zoomed_batch_is_the_clip_resampled():

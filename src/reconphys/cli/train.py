@@ -150,7 +150,11 @@ def train_gs(
 @user_errors
 def train_masks(
     data: list[Path] = typer.Option(
-        ..., "--data", help="Realistic-look dataset folder (make-data --scene realistic); repeat."
+        ...,
+        "--data",
+        help="Realistic-look dataset folder (make-data --scene realistic), or a folder of "
+        "recordings with masks (NNNN/video.mp4 + masks.npz: benchmarks/other_engine.py "
+        "render); repeat.",
     ),
     out: Path = typer.Option(..., "--out", help="Output folder (resumes when run again)."),
     steps: int = typer.Option(4000, help="Optimiser steps."),

@@ -2,7 +2,9 @@
 writing its masks beside a realistic dataset's frames (``reconphys segment-data``).
 
 Examples are single frames of realistic-look datasets (``make-data --scene realistic``, which
-stores the true masks): every view of every training-split sample is a clip; a step draws
+stores the true masks): every view of every training-split sample is a clip; a folder of
+recordings with their true masks (another engine's renders: :func:`recording_clips`) adds each
+recording as a clip; a step draws
 ``batch_size`` (clip, frame) pairs, one zoom factor log-uniform in ``zoom`` (the step's frames
 resampled: area-averaged down, bilinear up, so the network sees objects at more pixel sizes than
 the data were rendered at), a random ``crop``² window (smaller frames are used whole) and a
@@ -101,6 +103,9 @@ def load_clips(
     held_out = set().union(*map(held_out_meshes, exclude))
     clips = []
     for folder in folders:
+        if not (Path(folder) / "manifest.json").is_file():
+            clips += recording_clips(folder, held_out, progress)
+            continue
         dataset = DropDataset(folder, split=split)
         samples = [s for s in dataset.samples if s["object"] not in held_out]
         per_view = []  # one dataset a view: a sample's other views are not decoded
@@ -125,6 +130,48 @@ def load_clips(
                 )
     if not clips:
         raise InputError(f"no {split} samples", source=", ".join(folders))
+    return clips
+
+
+def recording_clips(folder: str, held_out: set[str] = frozenset(), progress: bool = False) -> list:
+    """Clips of a folder of recordings with their true masks (another engine's renders:
+    benchmarks/other_engine.py render): every subfolder with ``video.mp4`` and ``masks.npz``
+    (``masks`` [T, H, W], the frames' size) is one clip, all of it training (no split); one
+    whose ``truth.json`` names a mesh in ``held_out`` (``object``) is left out. InputError for
+    a folder without such clips, or masks that do not match their video."""
+    from ..capture.video import read_video
+
+    root = Path(folder)
+    found = (
+        sorted(f for f in root.iterdir() if (f / "video.mp4").is_file()) if root.is_dir() else []
+    )
+    if not found:
+        raise InputError(
+            "neither a dataset (manifest.json) nor recordings (*/video.mp4 + masks.npz)",
+            source=str(root),
+        )
+    if progress:
+        from tqdm.auto import tqdm
+
+        found = tqdm(found, desc=f"reading {folder}", unit="clip")
+    clips = []
+    for clip in found:
+        truth = clip / "truth.json"
+        if truth.is_file() and json.loads(truth.read_text()).get("object") in held_out:
+            continue
+        try:
+            masks = torch.from_numpy(np.load(clip / "masks.npz")["masks"]) > 0.5
+        except (OSError, KeyError, ValueError) as e:
+            raise InputError(f"no readable masks.npz with 'masks' ({e})", source=str(clip)) from e
+        decoded = read_video(clip / "video.mp4")[0][..., :3]
+        if masks.ndim != 3 or decoded.shape[:3] != tuple(masks.shape):
+            raise InputError(
+                f"masks {list(masks.shape)} do not match the video's frames "
+                f"{list(decoded.shape[:3])}",
+                source=str(clip),
+            )
+        frames = torch.from_numpy(decoded)
+        clips.append(_Clip(frames, clip_references(frames.float() / 255), masks))
     return clips
 
 
