@@ -462,6 +462,12 @@ def test_recordings_with_masks_are_training_clips(tmp_path):
     listed.write_text("random_urdfs/001/001.obj\n")
     kept = load_clips((str(root),), exclude=(str(listed),))
     assert len(kept) == 1 and torch.equal(kept[0].masks, torch.from_numpy(masks[:, ::-1].copy()))
+    odd = tmp_path / "odd"  # 15 px: the mp4 is padded to 16, the masks are not
+    _recording(odd / "0000", masks[:, :15, :15].copy(), "random_urdfs/004/004.obj")
+    assert recording_clips(str(odd))[0].frames.shape == (4, 15, 15, 3)
+    (odd / "0000" / "truth.json").write_text("{not json")
+    with pytest.raises(InputError, match="unreadable JSON"):
+        recording_clips(str(odd))
     np.savez_compressed(root / "0001" / "masks.npz", masks=masks[:3])
     with pytest.raises(InputError, match="do not match the video"):
         recording_clips(str(root))

@@ -133,12 +133,16 @@ def load_clips(
     return clips
 
 
-def recording_clips(folder: str, held_out: set[str] = frozenset(), progress: bool = False) -> list:
+def recording_clips(
+    folder: str, held_out: set[str] | frozenset[str] = frozenset(), progress: bool = False
+) -> list:
     """Clips of a folder of recordings with their true masks (another engine's renders:
     benchmarks/other_engine.py render): every subfolder with ``video.mp4`` and ``masks.npz``
     (``masks`` [T, H, W], the frames' size) is one clip, all of it training (no split); one
-    whose ``truth.json`` names a mesh in ``held_out`` (``object``) is left out. InputError for
-    a folder without such clips, or masks that do not match their video."""
+    whose ``truth.json`` names a mesh in ``held_out`` (``object``) is left out. A video one
+    pixel larger than its masks (H.264's even sizes: render/video.write_mp4 pads) is cut to them.
+    InputError for a folder without such clips, an unreadable masks.npz or truth.json, or masks
+    that do not match their video."""
     from ..capture.video import read_video
 
     root = Path(folder)
@@ -157,13 +161,22 @@ def recording_clips(folder: str, held_out: set[str] = frozenset(), progress: boo
     clips = []
     for clip in found:
         truth = clip / "truth.json"
-        if truth.is_file() and json.loads(truth.read_text()).get("object") in held_out:
-            continue
+        if truth.is_file():
+            try:
+                mesh = json.loads(truth.read_text()).get("object")
+            except (OSError, UnicodeDecodeError, ValueError, AttributeError) as e:
+                raise InputError(f"unreadable JSON ({e})", source=str(truth)) from e
+            if mesh in held_out:
+                continue
         try:
             masks = torch.from_numpy(np.load(clip / "masks.npz")["masks"]) > 0.5
         except (OSError, KeyError, ValueError) as e:
             raise InputError(f"no readable masks.npz with 'masks' ({e})", source=str(clip)) from e
         decoded = read_video(clip / "video.mp4")[0][..., :3]
+        if masks.ndim == 3 and all(
+            0 <= d - m <= 1 for d, m in zip(decoded.shape[1:3], masks.shape[1:], strict=True)
+        ):
+            decoded = decoded[:, : masks.shape[1], : masks.shape[2]]
         if masks.ndim != 3 or decoded.shape[:3] != tuple(masks.shape):
             raise InputError(
                 f"masks {list(masks.shape)} do not match the video's frames "
