@@ -30,7 +30,15 @@ that way, stiffness and damping log-uniform); ``measure`` then also says whether
 orders pybullet's springs (Spearman's ρ of the log k/m and log d/m read against its log
 stiffness / mass and log damping / mass, over all clips and within each mesh).
 
+``render --renderer mitsuba`` draws the same rigid drops with Mitsuba 3's path tracer instead of
+TinyRenderer (``pip install mitsuba``; soft shadows, bounced light, an exposure and the sRGB
+curve; mitsuba_look.py), ``--spp`` its samples a pixel: a look no network here trained on.
+Running ``render`` again into the same folder keeps the clips already there (their random draws
+made again, so the clips after them come out the same) and renders the rest.
+
     python benchmarks/other_engine.py render data/engine_pyb --clips 40 --size 128x128
+    python benchmarks/other_engine.py render data/mitsuba_pyb --clips 40 --size 128x128 \
+        --renderer mitsuba --seed 61
     python benchmarks/other_engine.py measure data/engine_pyb
     python benchmarks/other_engine.py render data/engine_soft --clips 42 --seed 31 --soft
     python benchmarks/other_engine.py measure data/engine_soft --search --true-masks
@@ -126,11 +134,15 @@ def _render_clip(
     height: int,
     soft: bool = False,
     textures: tuple[str, ...] = TEXTURES,
+    renderer: str = "tiny",
+    spp: int = 32,  # Mitsuba's samples a pixel
+    draw_only: bool = False,  # Mitsuba's random choices drawn, its frames not rendered
 ) -> dict | None:
     """One drop; None when the object leaves the frame or touches its border (drawn again).
     ``soft``: the mesh as pybullet's mass-spring deformable body (a spring on every edge and
     bending springs; stiffness and damping drawn from SOFT_STIFFNESS, SOFT_DAMPING), released
-    from rest."""
+    from rest. ``renderer="mitsuba"``: the frames path-traced by Mitsuba instead
+    (mitsuba_look.py; rigid drops), the masks still pybullet's."""
     import pybullet_data
 
     from reconphys.assets.mesh import load_mesh
@@ -157,7 +169,8 @@ def _render_clip(
     if soft:
         vertices = unit
     else:
-        vertices = np.asarray(load_mesh(data / mesh).vertices) * 0.015  # the URDFs' mesh scale
+        loaded = load_mesh(data / mesh)
+        vertices = np.asarray(loaded.vertices) * 0.015  # the URDFs' mesh scale
     extent = float((vertices.max(0) - vertices.min(0)).max())
     size = float(math.exp(rng.uniform(math.log(0.1), math.log(0.6))))
     scaling = size / extent
@@ -271,7 +284,7 @@ def _render_clip(
     projection = p.computeProjectionMatrixFOV(fov, width / height, 0.01, 50.0)
     view = _view_matrix_gl(world_to_cam)
     ambient, diffuse = float(rng.uniform(0.3, 0.7)), float(rng.uniform(0.3, 0.7))
-    frames, masks, lowest, centres = [], [], [], []
+    frames, masks, lowest, centres, poses = [], [], [], [], []
     contact_frame = None
     for t in range(FRAMES):
         if t:
@@ -290,6 +303,7 @@ def _render_clip(
             touching = bool(t and p.getContactPoints(body, plane))
         if contact_frame is None and touching:
             contact_frame = t
+        poses.append(world)
         lowest.append(world[world[:, 2].argmin()].tolist())
         centres.append(((world.max(0) + world.min(0)) / 2).tolist())
         _, _, rgba, _, segmentation = p.getCameraImage(
@@ -312,6 +326,19 @@ def _render_clip(
     border = masks[:, 0].any() or masks[:, -1].any() or masks[:, :, 0].any()
     if border or masks[:, :, -1].any() or not masks.reshape(FRAMES, -1).any(1).all():
         return None
+    if renderer == "mitsuba":  # the same drop, path-traced (mitsuba_look.py)
+        import mitsuba_look
+
+        look = {"floor": None, "wall": None, "object": None}
+        drawn = mitsuba_look.draw_look(rng, textures)
+        faces = np.asarray(loaded.faces)
+        args = (world_to_cam, fov, width, height)
+        if not draw_only:
+            mitsuba_look.check_alignment(masks[0], poses[0], faces, *args)
+            frames = mitsuba_look.render_frames(
+                drawn, np.stack(poses), faces, *args, wall_at, azimuth, spp
+            )
+        look.update(floor=drawn["floor"], wall=drawn["wall"], mitsuba=drawn)
     K = np.array(
         [
             [0.5 * height / math.tan(math.radians(fov) / 2), 0, width / 2],
@@ -357,6 +384,8 @@ def render(args) -> None:
     textures = tuple(args.textures.split(",")) if args.textures else TEXTURES
     if not set(textures) <= set(TEXTURES):
         raise SystemExit(f"--textures: each one of {', '.join(TEXTURES)}")
+    if args.soft and args.renderer != "tiny":
+        raise SystemExit("--soft: pybullet's TinyRenderer only")
     if args.soft:
         meshes = list(SOFT_MESHES)
     elif args.training_meshes:
@@ -371,8 +400,14 @@ def render(args) -> None:
         while written < args.clips:
             tries += 1
             mesh = meshes[written % len(meshes)]
+            folder = out / f"{written:04d}"
+            # a clip written by an earlier run of the same command: its draws made again (the
+            # clips after it stay the same), Mitsuba's frames not rendered again
+            done = (folder / "truth.json").is_file()
             try:
-                clip = _render_clip(p, rng, mesh, width, height, args.soft, textures)
+                clip = _render_clip(
+                    p, rng, mesh, width, height, args.soft, textures, args.renderer, args.spp, done
+                )
             except Exception as e:  # a broken mesh of the wheel's (random_urdfs/168 is one)
                 if not args.training_meshes:
                     raise
@@ -381,13 +416,17 @@ def render(args) -> None:
                 continue
             if clip is None:
                 continue
-            folder = out / f"{written:04d}"
-            folder.mkdir(exist_ok=True)
             noisy = clip["frames"] + rng.normal(
                 scale=rng.uniform(0.0, 0.02), size=clip["frames"].shape
             )
+            quality = rng.uniform(6, 8)
+            if done:
+                written += 1
+                print(f"{written}/{args.clips} {clip['truth']['object']} (kept)", flush=True)
+                continue
+            folder.mkdir(exist_ok=True)
             pixels = (np.clip(noisy, 0, 1) * 255 + 0.5).astype(np.uint8)
-            write_mp4(folder / "video.mp4", pixels, fps=1 / FRAME_DT, quality=rng.uniform(6, 8))
+            write_mp4(folder / "video.mp4", pixels, fps=1 / FRAME_DT, quality=quality)
             camera = CameraSpec(
                 torch.from_numpy(clip["K"]),
                 torch.from_numpy(clip["world_to_cam"]),
@@ -654,6 +693,14 @@ def main() -> None:
         default="",
         help=f"comma-separated images for the floor, wall and object (default all: {TEXTURES})",
     )
+    make.add_argument(
+        "--renderer",
+        choices=("tiny", "mitsuba"),
+        default="tiny",
+        help="pybullet's TinyRenderer, or Mitsuba 3's path tracer (pip install mitsuba; rigid "
+        "drops; benchmarks/mitsuba_look.py)",
+    )
+    make.add_argument("--spp", type=int, default=32, help="Mitsuba's samples a pixel")
     read = commands.add_parser("measure", help="read the clips as predict does")
     read.add_argument("out")
     read.add_argument("--limit", type=int, default=None)

@@ -38,9 +38,14 @@ from reconphys.models.mask_segmenter import (
 from reconphys.pipeline.samples import segment_frames
 from reconphys.render.video import write_mp4
 from reconphys.train.masks import (
+    BLUR,
+    EXPOSURE,
+    TONE_EXPONENT,
+    WHITE_BALANCE,
     MaskTrainSettings,
     _batch,
     _Clip,
+    _photometric,
     held_out_meshes,
     load_clips,
     recording_clips,
@@ -400,6 +405,14 @@ def test_train_masks_init_starts_from_the_given_weights(tmp_path):
         json.loads((p / "model.json").read_text())["training"]["settings"] for p in (tuned, fresh)
     ]
     assert recorded[0]["init"] == str(start) and "init" not in recorded[1]
+    assert "photometric" not in recorded[1]  # unchanged: an older run's settings still match
+    changed = tmp_path / "changed"
+    result = runner.invoke(app, [*command, "--out", str(changed), "--photometric", "0.5"])
+    assert result.exit_code == 0, result.output
+    settings = json.loads((changed / "model.json").read_text())["training"]["settings"]
+    assert settings["photometric"] == 0.5
+    result = runner.invoke(app, [*command, "--out", str(tmp_path / "y"), "--photometric", "2"])
+    assert result.exit_code != 0 and "--photometric" in result.output
     wide = [*command[:-1], "8,16", "--out", str(tmp_path / "wide"), "--init", str(start)]
     result = runner.invoke(app, wide)
     assert result.exit_code != 0 and "give --channels 8,12" in result.output
@@ -503,6 +516,41 @@ def test_a_zoomed_batch_is_the_clip_resampled():
             torch.allclose(x, p, atol=1e-6) or torch.allclose(x.flip(-1), p, atol=1e-6)
             for p in pooled
         )
+
+
+def test_photometric_changes_are_one_camera_for_the_whole_clip():
+    """_photometric: a flat clip stays flat (the blur keeps a constant), each channel moved by
+    a gain and exponent within their ranges, the same for every frame; a step with
+    ``photometric=1`` builds every input from the changed clip (its references made again) and
+    keeps the masks, where 0 gives the frames as stored."""
+    colour = torch.tensor([0.2, 0.5, 0.8])
+    flat = colour.expand(3, 6, 6, 3).clone()
+    gains = (EXPOSURE[0] * WHITE_BALANCE[0], EXPOSURE[1] * WHITE_BALANCE[1])
+    for seed in range(20):
+        changed = _photometric(flat, np.random.default_rng(seed))
+        assert torch.allclose(changed, changed[0, 0, 0].expand_as(changed), atol=1e-6)
+        lows = (gains[0] * colour).clamp(max=1) ** TONE_EXPONENT[1]
+        highs = (gains[1] * colour).clamp(max=1) ** TONE_EXPONENT[0]
+        assert ((changed[0, 0, 0] >= lows - 1e-6) & (changed[0, 0, 0] <= highs + 1e-6)).all()
+    assert BLUR[0] >= 0 and BLUR[1] < 1
+    frames = (torch.rand(4, 8, 8, 3) * 255).round().to(torch.uint8)
+    masks = torch.zeros(4, 8, 8, dtype=torch.bool)
+    masks[:, 2:6, 2:4] = True
+    clips = [_Clip(frames, clip_references(frames.float() / 255), masks)]
+    plain = MaskTrainSettings(data=(), out="", batch_size=4, crop=8)
+    original = frames.float().permute(0, 3, 1, 2) / 255
+    inputs, _ = _batch(clips, np.random.default_rng(0), plain)
+    for x in inputs:  # photometric 0 (the default): frames of the clip as stored
+        assert any(
+            torch.allclose(x[:3], f, atol=1e-6) or torch.allclose(x[:3].flip(-1), f, atol=1e-6)
+            for f in original
+        )
+    changed, kept = _batch(clips, np.random.default_rng(0), replace(plain, photometric=1.0))
+    assert all(torch.equal(t, masks[0]) or torch.equal(t, masks[0].flip(-1)) for t in kept)
+    for x in changed:  # not a frame of the clip as stored, its difference channels consistent
+        assert not any(torch.allclose(x[:3], f, atol=1e-3) for f in original)
+        assert not any(torch.allclose(x[:3].flip(-1), f, atol=1e-3) for f in original)
+        assert torch.allclose(x[6:9] - x[3:6], x[12:15], atol=1e-5)  # (f − Z) − (f − A) = A − Z
 
 
 def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(

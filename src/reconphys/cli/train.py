@@ -178,6 +178,11 @@ def train_masks(
     init: Path = typer.Option(
         None, help="Start from this trained segmenter (.safetensors or a train-masks folder)."
     ),
+    photometric: float = typer.Option(
+        0.0,
+        help="Share (0–1) of training clips seen as another camera would take them (exposure, "
+        "white balance, tone curve, blur; docs/usage.md).",
+    ),
     threads: int = typer.Option(2, help="CPU threads (torch)."),
     no_progress: bool = typer.Option(False, "--no-progress", help="No progress bar."),
 ):
@@ -192,6 +197,10 @@ def train_masks(
             raise InputError(f"must be ≥ 1, got {value}", field=name)
     if not (math.isfinite(lr) and lr > 0):
         raise InputError(f"must be a positive number, got {lr}", field="--lr")
+    if not 0 <= photometric <= 1:
+        raise InputError(
+            f"must be a share between 0 and 1, got {photometric}", field="--photometric"
+        )
     if not (all(math.isfinite(z) and z > 0 for z in zoom) and zoom[0] <= zoom[1]):
         raise InputError(f"must be 0 < LO ≤ HI, got {zoom[0]} {zoom[1]}", field="--zoom")
     try:
@@ -222,6 +231,7 @@ def train_masks(
         views_per_sample=views_per_sample,
         channels=widths,
         init="" if init is None else str(init),
+        photometric=photometric,
     )
     set_cpu_threads(threads)
     path = train_mask_segmenter(settings, progress=not no_progress, log=typer.echo)

@@ -62,13 +62,19 @@ class MaskTrainSettings:
     views_per_sample: int = 4  # sample i gives views i, i + 1, … (mod 4): more meshes per GB
     channels: tuple[int, ...] = SegmenterConfig().channels  # the U-Net's width per level
     init: str = ""  # a trained segmenter (.safetensors or a run's folder) to start from; "": random
+    # share of a step's clips seen through another camera (_photometric: exposure, white
+    # balance, tone curve, softness), their references made again from the changed frames
+    photometric: float = 0.0
 
 
 def _recorded(settings: MaskTrainSettings) -> dict:
-    """The settings a checkpoint records: ``init`` only when given (older runs still resume)."""
+    """The settings a checkpoint records: ``init`` and ``photometric`` only when given (older
+    runs still resume)."""
     recorded = asdict(settings)
     if not recorded["init"]:
         recorded.pop("init")
+    if not recorded["photometric"]:
+        recorded.pop("photometric")
     return recorded
 
 
@@ -196,6 +202,34 @@ def _zoomed(image: torch.Tensor, zoom: float) -> torch.Tensor:  # [C, H, W] → 
     return F.interpolate(image[None], size=size, mode=mode)[0]
 
 
+# _photometric's ranges: exposure gain, each channel's gain about it (white balance), the tone
+# curve's exponent, and the weight of a 3×3 blur (a softer lens or renderer)
+EXPOSURE = (0.6, 1.6)
+WHITE_BALANCE = (0.8, 1.25)
+TONE_EXPONENT = (0.7, 1.45)
+BLUR = (0.0, 0.8)
+
+
+def _photometric(frames: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
+    """A clip [T, H, W, 3] in [0, 1] as another camera might have taken it: one exposure gain
+    and white balance (log-uniform, EXPOSURE × WHITE_BALANCE per channel), one tone curve
+    ``x ** γ`` (γ log-uniform in TONE_EXPONENT) and one softness (a 3×3 binomial blur mixed in
+    at a weight uniform in BLUR) for all its frames, as a renderer or phone other than the
+    training data's would differ; the masks stay as they are."""
+    log_uniform = lambda low, high, n=None: np.exp(rng.uniform(np.log(low), np.log(high), n))  # noqa: E731
+    gain = log_uniform(*EXPOSURE) * log_uniform(*WHITE_BALANCE, 3)
+    exponent = float(log_uniform(*TONE_EXPONENT))
+    weight = float(rng.uniform(*BLUR))
+    x = (frames * torch.tensor(gain, dtype=frames.dtype)).clamp(0, 1) ** exponent
+    if weight > 0:
+        kernel = torch.tensor([1.0, 2.0, 1.0], dtype=x.dtype)
+        kernel = (kernel[:, None] * kernel[None, :] / 16).expand(3, 1, 3, 3)
+        channels = x.permute(0, 3, 1, 2)
+        blurred = F.conv2d(F.pad(channels, (1, 1, 1, 1), mode="replicate"), kernel, groups=3)
+        x = ((1 - weight) * channels + weight * blurred).permute(0, 2, 3, 1)
+    return x
+
+
 def _batch(clips: list, rng: np.random.Generator, settings: MaskTrainSettings):
     low, high = settings.zoom  # drawn only when it varies: the default recipe's batches as before
     zoom = float(np.exp(rng.uniform(np.log(low), np.log(high)))) if low < high else low
@@ -204,8 +238,13 @@ def _batch(clips: list, rng: np.random.Generator, settings: MaskTrainSettings):
         clip = clips[int(rng.integers(len(clips)))]
         count = clip.masks.shape[0]
         t = int(rng.integers(count))
-        frame = clip.frames[t : t + 1].float() / 255
-        x = frame_inputs(frame, clip.references, torch.tensor([t / (count - 1)]))[0]
+        references = clip.references
+        if settings.photometric and rng.uniform() < settings.photometric:
+            changed = _photometric(clip.frames.float() / 255, rng)
+            frame, references = changed[t : t + 1], clip_references(changed)
+        else:
+            frame = clip.frames[t : t + 1].float() / 255
+        x = frame_inputs(frame, references, torch.tensor([t / (count - 1)]))[0]
         x, y = _zoomed(x, zoom), _zoomed(clip.masks[t : t + 1].float(), zoom)[0]
         height, width = y.shape
         size_h, size_w = min(settings.crop, height), min(settings.crop, width)
