@@ -210,15 +210,18 @@ TONE_EXPONENT = (0.7, 1.45)
 BLUR = (0.0, 0.8)
 
 
+def _log_uniform(rng: np.random.Generator, low: float, high: float, size: int | None = None):
+    return np.exp(rng.uniform(np.log(low), np.log(high), size))
+
+
 def _photometric(frames: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
     """A clip [T, H, W, 3] in [0, 1] as another camera might have taken it: one exposure gain
     and white balance (log-uniform, EXPOSURE × WHITE_BALANCE per channel), one tone curve
     ``x ** γ`` (γ log-uniform in TONE_EXPONENT) and one softness (a 3×3 binomial blur mixed in
     at a weight uniform in BLUR) for all its frames, as a renderer or phone other than the
     training data's would differ; the masks stay as they are."""
-    log_uniform = lambda low, high, n=None: np.exp(rng.uniform(np.log(low), np.log(high), n))  # noqa: E731
-    gain = log_uniform(*EXPOSURE) * log_uniform(*WHITE_BALANCE, 3)
-    exponent = float(log_uniform(*TONE_EXPONENT))
+    gain = _log_uniform(rng, *EXPOSURE) * _log_uniform(rng, *WHITE_BALANCE, 3)
+    exponent = float(_log_uniform(rng, *TONE_EXPONENT))
     weight = float(rng.uniform(*BLUR))
     x = (frames * torch.tensor(gain, dtype=frames.dtype)).clamp(0, 1) ** exponent
     if weight > 0:
