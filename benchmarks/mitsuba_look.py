@@ -4,8 +4,9 @@
 Neither this project's renderer nor pybullet's: light carried by path tracing (soft shadows from
 a round lamp of random size, light bounced off the floor and the wall onto the object), a floor
 of pybullet_data's images tiled at a random scale, a wall, an object of one colour — matte or
-glossy — and a camera's exposure and sRGB curve. The masks stay pybullet's (the same geometry
-and camera; :func:`check_alignment` compares Mitsuba's own silhouette of frame 0 with them).
+glossy — and a camera's exposure and sRGB curve. The true masks are Mitsuba's own silhouettes of
+the object (:func:`silhouettes`); :func:`check_alignment` first compares frame 0's with
+pybullet's mask of the same pose (a camera-convention check).
 """
 
 from __future__ import annotations
@@ -182,26 +183,31 @@ def render_frames(
     return _srgb(np.clip(linear * exposure, 0.0, 1.0))
 
 
-def silhouette(
-    vertices: np.ndarray,  # [V, 3] world
-    faces: np.ndarray,
+def silhouettes(
+    vertices: np.ndarray,  # [T, V, 3] the object's vertices every frame, world, metres
+    faces: np.ndarray,  # [F, 3]
     world_to_cam: np.ndarray,
     fov: float,
     width: int,
     height: int,
-) -> np.ndarray:  # [H, W] bool: Mitsuba's coverage of the object alone ≥ ½
+) -> np.ndarray:  # [T, H, W] bool: Mitsuba's coverage of the object alone ≥ ½, each frame
+    """What Mitsuba draws of the object, frame by frame: the clip's true masks (the frames'
+    own outline; pybullet's rasterised masks of the same poses differ by up to a pixel's rim)."""
     mi = _variant()
+    drawn = []
     with tempfile.TemporaryDirectory() as folder:
         ply = Path(folder) / "object.ply"
-        _write_ply(ply, vertices, faces)
-        scene = {
-            "type": "scene",
-            "integrator": {"type": "direct"},
-            "object": {"type": "ply", "filename": str(ply)},
-            "sensor": _sensor(world_to_cam, fov, width, height, 16, rgba=True),
-        }
-        image = np.asarray(mi.render(mi.load_dict(scene), spp=16), dtype=np.float64)
-    return image[..., 3] >= 0.5
+        for world in vertices:
+            _write_ply(ply, world, faces)
+            scene = {
+                "type": "scene",
+                "integrator": {"type": "direct"},
+                "object": {"type": "ply", "filename": str(ply)},
+                "sensor": _sensor(world_to_cam, fov, width, height, 16, rgba=True),
+            }
+            image = np.asarray(mi.render(mi.load_dict(scene), spp=16), dtype=np.float64)
+            drawn.append(image[..., 3] >= 0.5)
+    return np.stack(drawn)
 
 
 def check_alignment(mask: np.ndarray, vertices, faces, world_to_cam, fov, width, height) -> float:
@@ -209,7 +215,7 @@ def check_alignment(mask: np.ndarray, vertices, faces, world_to_cam, fov, width,
     SystemExit past MAX_CENTROID_OFFSET_PX or with an area off by more than MAX_AREA_SHARE of
     it plus a half-pixel rim (the two cameras or poses disagree: a convention error). Not the
     IoU: a small object's rim alone takes it to 0.8."""
-    drawn = silhouette(vertices, faces, world_to_cam, fov, width, height)
+    drawn = silhouettes(vertices[None], faces, world_to_cam, fov, width, height)[0]
     centroids = [np.argwhere(m).mean(0) if m.any() else np.full(2, np.inf) for m in (drawn, mask)]
     offset = float(np.linalg.norm(centroids[0] - centroids[1]))
     area = float(mask.sum())

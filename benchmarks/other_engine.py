@@ -9,7 +9,8 @@ area-averaged, with sensor noise and H.264 at the size asked.
 
 ``render OUT --clips N`` writes, per clip ``OUT/NNNN/``: ``video.mp4`` (what a user brings),
 ``camera.json`` (the true camera, reconphys's format), ``masks.npz`` (the true masks [T, H, W]:
-pybullet's segmentation at 2×, ≥ half a pixel's area) and ``truth.json`` (frame 0's pose and
+pybullet's segmentation at 2×, ≥ half a pixel's area; with ``--renderer mitsuba`` Mitsuba's own
+silhouettes, pybullet's kept beside as ``pybullet``) and ``truth.json`` (frame 0's pose and
 velocity, the object's lowest point in frame 0, the first contact). Objects: the 40 pybullet
 meshes that are ``data/pyb``'s test split (held out of every network's training), scaled to
 0.1–0.6 m; half are released from rest, half tossed (≤ 1 m/s sideways, −0.5–1 m/s up, ≤ 2 rad/s).
@@ -326,6 +327,7 @@ def _render_clip(
     border = masks[:, 0].any() or masks[:, -1].any() or masks[:, :, 0].any()
     if border or masks[:, :, -1].any() or not masks.reshape(FRAMES, -1).any(1).all():
         return None
+    pybullet_masks, agreement = None, None
     if renderer == "mitsuba":  # the same drop, path-traced (mitsuba_look.py)
         import mitsuba_look
 
@@ -338,6 +340,11 @@ def _render_clip(
             frames = mitsuba_look.render_frames(
                 drawn, np.stack(poses), faces, *args, wall_at, azimuth, spp
             )
+            # the truth is what Mitsuba drew; pybullet's masks of the same poses kept beside
+            pybullet_masks = masks
+            masks = mitsuba_look.silhouettes(np.stack(poses), faces, *args)
+            pairs = zip(masks, pybullet_masks, strict=True)
+            agreement = float(np.mean([_iou(a, b) for a, b in pairs]))
         look.update(floor=drawn["floor"], wall=drawn["wall"], mitsuba=drawn)
     K = np.array(
         [
@@ -368,7 +375,10 @@ def _render_clip(
             "textures": look,  # pybullet_data images on the floor, the wall, the object
             # pybullet's mass-spring body: its spring stiffness and damping (None: rigid)
             "springs": springs,
+            # Mitsuba's clips: their masks are its silhouettes; pybullet's agree to this IoU
+            "pybullet_masks_iou": agreement,
         },
+        "pybullet_masks": pybullet_masks,
     }
 
 
@@ -434,13 +444,20 @@ def render(args) -> None:
                 height,
             )
             write_camera(folder / "camera.json", camera)
-            np.savez_compressed(folder / "masks.npz", masks=clip["masks"])
+            kept = {} if clip["pybullet_masks"] is None else {"pybullet": clip["pybullet_masks"]}
+            np.savez_compressed(folder / "masks.npz", masks=clip["masks"], **kept)
             (folder / "truth.json").write_text(json.dumps(clip["truth"], indent=1) + "\n")
             written += 1
             print(f"{written}/{args.clips} {clip['truth']['object']} ({tries} drawn)", flush=True)
     finally:
         p.disconnect(client)
     print(f"{written} clips in {time.perf_counter() - started:.0f} s")
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    """IoU of two [H, W] bool masks (1 when both are empty)."""
+    union = np.logical_or(a, b).sum()
+    return float(np.logical_and(a, b).sum() / union) if union else 1.0
 
 
 def _camera_errors(masks, truth, camera, fov_deg, fit_px) -> dict:
@@ -471,11 +488,12 @@ def measure(args) -> None:
     rows = []
     for folder in folders:
         truth = json.loads((folder / "truth.json").read_text())
-        true_masks = torch.from_numpy(np.load(folder / "masks.npz")["masks"]).float()
+        stored = np.load(folder / "masks.npz")
+        true_masks = torch.from_numpy(stored["masks"]).float()
         decoded, *_ = read_video(folder / "video.mp4")
         height, width = true_masks.shape[1:]
         frames = torch.from_numpy(decoded[:, :height, :width, :3]).float() / 255
-        masks = segment_clip(segmenter, frames)
+        masks = segment_clip(segmenter, frames, colours=not args.no_colours)
         camera = read_camera(folder / "camera.json", width, height)
         row = {
             "clip": folder.name,
@@ -483,6 +501,10 @@ def measure(args) -> None:
             "from_rest": truth["released_from_rest"],
             "iou": mean_mask_iou(masks, true_masks),
         }
+        if "pybullet" in stored:  # Mitsuba's clips: against pybullet's masks as well (before)
+            pybullet_masks = torch.from_numpy(stored["pybullet"]).float()
+            row["iou_pybullet_masks"] = mean_mask_iou(masks, pybullet_masks)
+            row["pybullet_masks_iou"] = truth["pybullet_masks_iou"]
         if truth.get("springs"):  # a deformable drop: what the physics should order
             row["springs"] = truth["springs"]
             row["mass_kg"] = truth["mass_kg"]
@@ -564,6 +586,12 @@ def _report(rows: list[dict]) -> None:
         f"mask IoU (segmenter): mean {ious.mean():.3f}, median {np.median(ious):.3f}, "
         f"min {ious.min():.3f}, >= 0.9: {(ious >= 0.9).mean():.0%}"
     )
+    if all("iou_pybullet_masks" in r for r in rows):  # Mitsuba's clips
+        print(
+            "  the same masks against pybullet's of the same poses: mean "
+            f"{np.mean([r['iou_pybullet_masks'] for r in rows]):.3f}; pybullet's against "
+            f"Mitsuba's own: {np.mean([r['pybullet_masks_iou'] for r in rows]):.3f}"
+        )
     for name in ("camera_true_masks", "camera_segmenter"):
         good = [r[name] for r in rows if "refused" not in r[name]]
         if not good:
@@ -720,6 +748,12 @@ def main() -> None:
         nargs="+",
         default=None,
         help="weights: one file, or several averaged (default: the shipped ensemble)",
+    )
+    read.add_argument(
+        "--no-colours",
+        action="store_true",
+        help="the segmenter's masks without the clip's colour model (models/mask_colours.py; "
+        "the front end's rows only: predict keeps its default)",
     )
     read.add_argument("--json", default=None, help="write the per-clip rows here")
     args = parser.parse_args()

@@ -302,7 +302,10 @@ def load_observation(
             black = float(colour.max()) <= BLACK_LEVEL
         if segment is not None and not (uniform and _plausible(chosen)):
             chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
-            mask_source = "mask segmenter (no clean plate; the border colour is not the backdrop)"
+            mask_source = (
+                "mask segmenter and the clip's own colours (no clean plate; the border colour is "
+                "not the backdrop)"
+            )
             black = False
             fit_px = SEGMENTER_FALL_FIT_PX
     time_resampling = "the recorded frames"

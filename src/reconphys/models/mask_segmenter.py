@@ -34,6 +34,7 @@ from torch import Tensor
 from ..capture.window import pixel_bounds
 from ..errors import InputError
 from ..io import atomic_file, read_json
+from .mask_colours import colour_refined
 
 FORMAT = "reconphys.mask_segmenter"
 VERSION = 1
@@ -54,6 +55,9 @@ TRACK_QUANTUM = 16  # px: window sides are multiples of this (few shapes; the U-
 TRACK_CHUNK = 5  # frames segmented together, each in its own window of one shared size
 TRACK_MAX_SHARE = 0.6  # a window over this share of the frame: the whole frame instead
 OUTSIDE_LOGIT = -20.0  # the logit of a pixel outside its frame's window: background
+# segment_clip's steps after the network, named in the shipped fingerprint (stored masks of
+# another rule are stale): "colours-1" the clip's colour model (mask_colours.py, 2026-12-03)
+MASKS_RULE = "colours-1"
 
 
 # bfloat16 is taken where a probe runs it at least this much faster than float32 (below)
@@ -206,6 +210,7 @@ def clip_logits(
     channels_last: bool = True,
     bfloat16: bool | None = None,
     track: bool = True,
+    colours: bool = False,
 ) -> Tensor:
     """Object logits [T, H, W] of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera).
 
@@ -233,6 +238,9 @@ def clip_logits(
     faster again where the CPU has AVX-512 BF16, the logits within ~0.2 of float32's and about
     2 pixels in 10⁵ on the other side of 0 on realistic clips (a test compares them with
     ``bfloat16=False``, the reference twin; docs/usage.md#the-segmenter-in-bfloat16-2026-11-29).
+
+    ``colours`` adds the clip's own colour model's logit near the object (mask_colours.py; at
+    the segmented size, before any resampling): what segment_clip does by default.
     """
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
         raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
@@ -243,7 +251,7 @@ def clip_logits(
         size = (max(1, round(height * factor)), max(1, round(width * factor)))
         small = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
         small = small.permute(0, 2, 3, 1)
-        logits = clip_logits(model, small, max_side, channels_last, bfloat16, track)
+        logits = clip_logits(model, small, max_side, channels_last, bfloat16, track, colours)
         return F.interpolate(logits[:, None], size=(height, width), mode="bilinear")[:, 0]
     references = clip_references(frames)
     times = torch.linspace(0, 1, frames.shape[0])
@@ -269,11 +277,17 @@ def clip_logits(
             return model(inputs).float()
 
     if track:
-        return tracked_logits(run, frames.shape[0], height, width, frames.device)
-    logits = []
-    for start in range(0, frames.shape[0], FRAMES_PER_CALL):
-        logits.append(run(list(range(start, min(start + FRAMES_PER_CALL, frames.shape[0])))))
-    return torch.cat(logits).contiguous()
+        logits = tracked_logits(run, frames.shape[0], height, width, frames.device)
+    else:
+        logits = torch.cat(
+            [
+                run(list(range(start, min(start + FRAMES_PER_CALL, frames.shape[0]))))
+                for start in range(0, frames.shape[0], FRAMES_PER_CALL)
+            ]
+        ).contiguous()
+    if colours:
+        logits = colour_refined(logits, frames, references, keep_main_blob(logits > 0))
+    return logits
 
 
 @dataclass(frozen=True)
@@ -407,11 +421,12 @@ def segment_clip(
     max_side: int = MAX_SIDE,
     bfloat16: bool | None = None,
     track: bool = True,
+    colours: bool = True,
 ) -> Tensor:
     """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera): logits
-    above 0 (of the clip at most ``max_side`` px; ``bfloat16``, ``track``: see clip_logits), the
-    main blob kept."""
-    logits = clip_logits(model, frames, max_side, bfloat16=bfloat16, track=track)
+    above 0 (of the clip at most ``max_side`` px; ``bfloat16``, ``track``, ``colours``: see
+    clip_logits; ``colours=False`` is the network's alone), the main blob kept."""
+    logits = clip_logits(model, frames, max_side, bfloat16=bfloat16, track=track, colours=colours)
     return keep_main_blob(logits > 0).float()
 
 
@@ -433,13 +448,16 @@ def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:
 
 def shipped_fingerprint(path: str | os.PathLike | None = None) -> str:
     """The first 16 hex digits of the SHA-256 of a segmenter's weights (default: the shipped
-    ensemble's members' weights, one after the other)."""
+    ensemble's members' weights, one after the other, then MASKS_RULE: stored masks of an
+    earlier rule are not taken for segment_clip's)."""
     import hashlib
 
     paths = SHIPPED_MASKS_PATHS if path is None else (Path(path),)
     digest = hashlib.sha256()
     for member in paths:
         digest.update(member.read_bytes())
+    if path is None:
+        digest.update(MASKS_RULE.encode())
     return digest.hexdigest()[:16]
 
 

@@ -57,7 +57,7 @@ def load_sample(
     fit_px = FALL_FIT_PX
     if dataset.settings.scene == "realistic":  # as a recording: no stored mask is used
         masks = segment_frames(frames)
-        mask_source = "mask segmenter (realistic scene)"
+        mask_source = "mask segmenter and the clip's own colours (realistic scene)"
         fit_px = SEGMENTER_FALL_FIT_PX
     observation = stored_observation(
         frames,
