@@ -11,8 +11,8 @@ reference frames, chromaticity, squares and products) is fitted to the confident
 below minus it: background), and its logit, clamped to ±:data:`MAX_SHIFT` and weighed by
 :data:`WEIGHT`, is added to the network's on that band. Pixels far from the object are left as
 they were, so the refinement can move the outline, not add an object elsewhere. A clip with too
-few sure pixels of either kind is returned unchanged. Tens of milliseconds a 128-px clip on one
-CPU core (docs/benchmarks.md).
+few sure pixels of either kind is returned unchanged. 20–45 ms a 128-px clip on a 2-core CPU
+(docs/benchmarks.md); it runs on the CPU whatever the logits' device.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ NEWTON_STEPS = 12
 def colour_features(
     pixels: Tensor,  # [N, 3] in [0, 1]: a frame's pixels
     references: Tensor,  # [3, N, 3]: A, Z and M (clip_references) at the same pixels
-) -> Tensor:  # [N, 28]
+) -> Tensor:  # [N, 26]
     """Per-pixel features: the colour, its differences from the three references and their
     lengths, chromaticity (r, g), squares of the colour and of its difference from the median
     frame, and the colour's three products."""
@@ -112,6 +112,10 @@ def colour_refined(
 ) -> Tensor:  # [T, H, W]
     """The logits with the clip's colour model's logit (clamped, weighed) added within BAND_PX of
     the main blob; the logits unchanged when fewer than MIN_SAMPLES sure pixels of either kind."""
+    device = logits.device
+    logits, frames, references, main_blob = (
+        x.cpu() for x in (logits, frames, references, main_blob)
+    )
     band = near_object(main_blob)
     where = band.nonzero(as_tuple=True)
     at = references.permute(0, 2, 3, 1)[:, where[1], where[2]]  # [3, N, 3]
@@ -120,7 +124,7 @@ def colour_refined(
     sure_object = (values > CONFIDENT_LOGIT) & main_blob[where]
     sure_background = values < -CONFIDENT_LOGIT
     if min(int(sure_object.sum()), int(sure_background.sum())) < MIN_SAMPLES:
-        return logits
+        return logits.to(device)
     generator = torch.Generator().manual_seed(0)
     picked = [
         indices[torch.randperm(len(indices), generator=generator)[: MAX_SAMPLES // 2]]
@@ -133,4 +137,4 @@ def colour_refined(
     shift = ((features - mean) / spread) @ weights[:-1] + weights[-1]
     refined = logits.clone()
     refined[where] = values + WEIGHT * shift.clamp(-MAX_SHIFT, MAX_SHIFT)
-    return refined
+    return refined.to(device)
