@@ -19,6 +19,7 @@ from reconphys.capture.observation import MIN_MAIN_REGION_SHARE, main_region_sha
 from reconphys.cli import app
 from reconphys.data import DropDataset, GeneratedDropDataset, make_dataset, make_settings
 from reconphys.errors import InputError
+from reconphys.models.mask_colours import colour_refined, near_object
 from reconphys.models.mask_segmenter import (
     SHIPPED_MASKS_PATHS,
     Box,
@@ -622,3 +623,23 @@ def test_commands_that_read_object_on_black_refuse_a_realistic_dataset(tmp_path)
     command = ["train-gs", "--data", str(data), "--out", str(tmp_path / "gs"), "--steps", "1"]
     result = runner.invoke(app, command)
     assert result.exit_code == 2 and "train-gs reads the plain look only" in result.output
+
+
+def test_segment_clip_gives_the_clips_own_colours_a_second_look(realistic_views):
+    """segment_clip's default adds the colour model's logit near the object (mask_colours.py);
+    ``colours=False`` is the networks' masks alone; the two differ only within the band, and the
+    masks stay as close to the truth."""
+    model = load_mask_segmenter()
+    changed = 0
+    for frames, truth in realistic_views:
+        logits = clip_logits(model, frames, bfloat16=False)
+        alone = segment_clip(model, frames, bfloat16=False, colours=False)
+        assert torch.equal(alone.bool(), keep_main_blob(logits > 0))
+        base = keep_main_blob(logits > 0)
+        refined = colour_refined(logits, frames, clip_references(frames), base)
+        default = segment_clip(model, frames, bfloat16=False)
+        assert torch.equal(default.bool(), keep_main_blob(refined > 0))
+        assert not (default.bool() != alone.bool())[~near_object(base)].any()
+        assert iou(default, truth) > iou(alone, truth) - 0.02
+        changed += int((default != alone).sum())
+    assert changed > 0  # not a step that never acts
