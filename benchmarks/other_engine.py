@@ -343,8 +343,9 @@ def _render_clip(
             # the truth is what Mitsuba drew; pybullet's masks of the same poses kept beside
             pybullet_masks = masks
             masks = mitsuba_look.silhouettes(np.stack(poses), faces, *args)
-            pairs = zip(masks, pybullet_masks, strict=True)
-            agreement = float(np.mean([_iou(a, b) for a, b in pairs]))
+            from common import mean_mask_iou
+
+            agreement = mean_mask_iou(torch.from_numpy(masks), torch.from_numpy(pybullet_masks))
         look.update(floor=drawn["floor"], wall=drawn["wall"], mitsuba=drawn)
     K = np.array(
         [
@@ -452,12 +453,6 @@ def render(args) -> None:
     finally:
         p.disconnect(client)
     print(f"{written} clips in {time.perf_counter() - started:.0f} s")
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    """IoU of two [H, W] bool masks (1 when both are empty)."""
-    union = np.logical_or(a, b).sum()
-    return float(np.logical_and(a, b).sum() / union) if union else 1.0
 
 
 def _camera_errors(masks, truth, camera, fov_deg, fit_px) -> dict:
