@@ -171,3 +171,30 @@ def test_a_slow_motion_video_is_read_at_the_rate_the_phone_filmed_at(tmp_path):
         assert np.abs(_centroid(mask) - _falling_centre(j * FRAME_DT)).max() < 0.5
     slowed = load_observation(played, camera="dataset")
     assert np.abs(_centroid(slowed.masks[19]) - _falling_centre(19 * FRAME_DT)).max() > 10
+
+
+def test_a_phone_video_stored_sideways_reads_upright(tmp_path, caplog):
+    """A phone filming upright stores its sensor's frames sideways and a display rotation in the
+    video (a display matrix): read as it is shown — portrait, the disc where it was drawn in
+    every frame — without a note about the frame size; the same frames without the rotation read
+    sideways."""
+    height, width = 64, 48
+    v, u = np.mgrid[0:height, 0:width] + 0.5
+    centres = [np.array([12.0 + 20.0 * s, 10.0 + 60.0 * s**2]) for s in np.arange(20) / 30.0]
+    upright = [((u - c[0]) ** 2 + (v - c[1]) ** 2 <= 25.0) for c in centres]  # [H, W] discs
+    stored = [np.ascontiguousarray(np.rot90(d, k=-1)) for d in upright]  # the sensor's frames
+    stored = [(np.repeat(d[..., None], 3, -1) * 230).astype(np.uint8) for d in stored]
+    sideways = tmp_path / "sideways.mp4"
+    imageio.mimwrite(sideways, stored, fps=30.0, codec="libx264", quality=10, macro_block_size=1)
+    phone = tmp_path / "phone.mp4"
+    arguments = ["-v", "error", "-y", "-display_rotation", "90", "-i", str(sideways)]
+    run = run_ffmpeg([*arguments, "-c", "copy", str(phone)])
+    assert run.returncode == 0, run.stderr
+    with caplog.at_level("WARNING"):
+        frames = video_module.read_video(phone)[0]
+    assert not caplog.records  # ffmpeg's rotation is expected: no note about the frame size
+    assert frames.shape[1:3] == (height, width)
+    for frame, centre in zip(frames, centres, strict=True):
+        rows, cols = np.nonzero(frame[..., 1] > 115)
+        assert np.abs(np.array([cols.mean(), rows.mean()]) + 0.5 - centre).max() < 0.5
+    assert video_module.read_video(sideways)[0].shape[1:3] == (width, height)

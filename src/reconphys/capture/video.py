@@ -4,6 +4,7 @@ plugins) or a folder of frames, and resampling it in time to the simulator's ``f
 from __future__ import annotations
 
 import functools
+import logging
 import math
 import os
 import re
@@ -16,6 +17,18 @@ from ..render.video import FOCAL_35MM_KEY, run_ffmpeg
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v", ".gif")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
+
+
+class _RotatedFrameSizeNote(logging.Filter):
+    """Drops imageio-ffmpeg's note that the frames read differ in size from the stream's: a
+    phone's upright video is stored sideways with a display rotation, which ffmpeg applies as it
+    decodes (the frames come out upright, width and height swapped) — expected, not a fault."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "is different from the source frame size" not in record.getMessage()
+
+
+logging.getLogger("imageio_ffmpeg").addFilter(_RotatedFrameSizeNote())
 
 
 def _as_rgb_or_rgba(frame: np.ndarray, source: str) -> np.ndarray:
