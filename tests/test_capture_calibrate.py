@@ -507,3 +507,21 @@ def test_a_slow_motion_video_is_refused_with_its_cause_and_read_with_its_real_ra
     estimate = estimate_camera(masks, 0.03 / 4, fov_deg=45.0, ground_from_touch=False)
     centre_0 = w2c[:3, :3] @ np.array([0.0, 0.0, radius + 1.5]) + w2c[:3, 3]
     assert estimate.distance == pytest.approx(float(np.linalg.norm(centre_0)), rel=0.3)
+
+
+def test_the_overlap_with_frame_0_is_each_frames_iou_with_it():
+    """still_frames' and check_masks' overlap, counted on the masks' bounding box, is the IoU of
+    each whole frame's mask with frame 0's (an empty frame: 0; every frame empty: 0)."""
+    from reconphys.capture.masks import _overlap_with_first
+
+    generator = torch.Generator().manual_seed(0)
+    masks = torch.zeros(12, 90, 70)
+    for t in range(12):
+        masks[t, 10 + 4 * t : 30 + 4 * t, 20 + t : 44 + t] = 1.0
+    masks *= (torch.rand(masks.shape, generator=generator) > 0.1).float()  # holes
+    masks[5] = 0.0
+    seen = masks > 0.5
+    whole = [float((s & seen[0]).sum()) / max(float((s | seen[0]).sum()), 1.0) for s in seen]
+    assert _overlap_with_first(masks).tolist() == pytest.approx(whole, abs=1e-7)
+    assert _overlap_with_first(masks)[5] == 0.0 and 0.0 < whole[1] < 1.0
+    assert _overlap_with_first(torch.zeros(4, 8, 8)).tolist() == [0.0] * 4

@@ -198,3 +198,19 @@ def test_a_phone_video_stored_sideways_reads_upright(tmp_path, caplog):
         rows, cols = np.nonzero(frame[..., 1] > 115)
         assert np.abs(np.array([cols.mean(), rows.mean()]) + 0.5 - centre).max() < 0.5
     assert video_module.read_video(sideways)[0].shape[1:3] == (width, height)
+
+
+def test_frames_made_smaller_beside_the_decoding_are_the_ones_made_after_it(tmp_path):
+    """read_video's max_side (each frame resized in a thread as the next is decoded) gives the
+    frames fit_within gives the whole decoded clip, in order; with ``until`` the same first
+    frames."""
+    generator = np.random.default_rng(0)
+    clip = generator.integers(0, 256, (12, 90, 120, 3), dtype=np.uint8)
+    path = tmp_path / "clip.mp4"
+    imageio.mimwrite(path, clip, fps=30.0, codec="libx264", quality=10, macro_block_size=1)
+    whole = video_module.read_video(path)[0]
+    small = video_module.read_video(path, None, 50)[0]
+    assert small.shape == (12, 38, 50, 3)
+    assert np.array_equal(small, video_module.fit_within(whole, 50))
+    first = video_module.read_video(path, 0.1, 50)[0]
+    assert 3 <= len(first) < 12 and np.array_equal(first, small[: len(first)])

@@ -21,6 +21,7 @@ from reconphys.data import DropDataset, GeneratedDropDataset, make_dataset, make
 from reconphys.errors import InputError
 from reconphys.models.mask_colours import colour_refined, near_object
 from reconphys.models.mask_segmenter import (
+    MAIN_BLOB_SHARE,
     SHIPPED_MASKS_PATHS,
     Box,
     MaskSegmenter,
@@ -110,6 +111,25 @@ def test_specks_and_strips_are_dropped_pieces_of_the_object_kept():
     assert not bool(kept[0, 18, 18]) and int(kept[0].sum()) == 49 + 21 + 20
     assert int(kept[1].sum()) == 20  # the largest region wins; check_masks then refuses it
     assert torch.equal(keep_main_blob(masks[:1, 5:12, 5:12]), masks[:1, 5:12, 5:12])
+
+
+def test_the_main_blob_on_the_bounding_box_is_the_whole_frames():
+    """keep_main_blob labels each mask on its bounding box: the regions, and so what it keeps,
+    are those of scipy's labelling of the whole frame (random specks, holes, empty frames)."""
+    from scipy import ndimage
+
+    generator = torch.Generator().manual_seed(0)
+    for trial in range(20):
+        masks = torch.rand(5, 40, 50, generator=generator) > 0.95
+        masks[:, 10:20, 12:30] |= torch.rand(5, 10, 18, generator=generator) > 0.2
+        masks[trial % 5] = False
+        expected = []
+        for mask in masks.numpy():
+            labels, count = ndimage.label(mask, structure=np.ones((3, 3)))
+            sizes = np.bincount(labels.ravel())[1:]
+            big = 1 + np.nonzero(sizes >= MAIN_BLOB_SHARE * sizes.max())[0] if count else []
+            expected.append(torch.from_numpy(np.isin(labels, big)))
+        assert torch.equal(keep_main_blob(masks), torch.stack(expected))
 
 
 def test_any_image_size_and_mirror_equivariance_of_the_padding():

@@ -261,7 +261,7 @@ def load_observation(
     recorded = raw.shape[0]
     fit_px = FALL_FIT_PX
     raw = raw[picks]
-    rgb = torch.from_numpy(raw[..., :3].astype(np.float32) / 255.0)
+    rgb = torch.from_numpy(raw[..., :3]).float().div_(255.0)  # as numpy's float32 / 255
     # a hand-held camera: its shake read from the background and taken out (stabilize.py); a
     # one-colour border (a plain backdrop) shows no shake, and an object on it is not one
     shake = Shake(None, 0) if border_is_uniform(rgb) else read_shake(rgb)
