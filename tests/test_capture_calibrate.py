@@ -525,3 +525,27 @@ def test_the_overlap_with_frame_0_is_each_frames_iou_with_it():
     assert _overlap_with_first(masks).tolist() == pytest.approx(whole, abs=1e-7)
     assert _overlap_with_first(masks)[5] == 0.0 and 0.0 < whole[1] < 1.0
     assert _overlap_with_first(torch.zeros(4, 8, 8)).tolist() == [0.0] * 4
+
+
+def test_the_track_on_the_masks_bounding_box_is_the_whole_frames():
+    """mask_track finds each frame's pixels on the bounding box of all the masks: its centroid,
+    bottom edge, width and area are those counted over the whole frame."""
+    from reconphys.capture.calibrate import mask_track
+
+    generator = torch.Generator().manual_seed(1)
+    masks = torch.zeros(8, 70, 90)
+    for t in range(8):
+        masks[t, 12 + 5 * t : 25 + 5 * t, 30 + 2 * t : 47 + 2 * t] = 1.0
+    masks *= (torch.rand(masks.shape, generator=generator) > 0.15).float()
+    track = mask_track(masks)
+    for t, mask in enumerate(masks):
+        v, u = torch.nonzero(mask > 0.5, as_tuple=True)
+        v, u = v.double(), u.double()
+        assert track.centroid[t].tolist() == [float(u.mean()) + 0.5, float(v.mean()) + 0.5]
+        assert track.bottom[t] == float(torch.quantile(v, 0.98)) + 1.0
+        spread = torch.quantile(u, torch.tensor([0.02, 0.98], dtype=torch.float64))
+        assert track.width[t] == float(spread[1] - spread[0]) + 1.0
+        assert track.area[t] == len(v)
+    masks[3] = 0.0
+    with pytest.raises(InputError, match="empty in frame 3"):
+        mask_track(masks)

@@ -186,10 +186,16 @@ class _Track:
 def mask_track(masks: Tensor) -> _Track:
     """Centroid, bottom edge and area of every frame's mask [T, H, W] (all non-empty)."""
     centroid, bottom, width, area = [], [], [], []
-    for t, mask in enumerate(masks):
-        v, u = torch.nonzero(mask > 0.5, as_tuple=True)
+    seen = masks > 0.5
+    rows, cols = seen.any(2).any(0).nonzero()[:, 0], seen.any(1).any(0).nonzero()[:, 0]
+    top, left = (int(rows[0]), int(cols[0])) if len(rows) else (0, 0)
+    if len(rows):  # found on the bounding box of every frame's mask: the same pixels, less work
+        seen = seen[:, top : int(rows[-1]) + 1, left : int(cols[-1]) + 1]
+    for t, mask in enumerate(seen):
+        v, u = torch.nonzero(mask, as_tuple=True)
         if len(v) == 0:
             raise InputError(f"the object's mask is empty in frame {t}", source="masks")
+        v, u = v + top, u + left
         centroid.append([float(u.double().mean()) + 0.5, float(v.double().mean()) + 0.5])
         bottom.append(float(torch.quantile(v.double(), 0.98)) + 1.0)
         columns = torch.quantile(u.double(), torch.tensor([0.02, 0.98], dtype=torch.float64))

@@ -260,7 +260,8 @@ def load_observation(
         mask_source = ""
     recorded = raw.shape[0]
     fit_px = FALL_FIT_PX
-    raw = raw[picks]
+    if not np.array_equal(picks, np.arange(recorded)):  # else every frame: no copy
+        raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3]).float().div_(255.0)  # as numpy's float32 / 255
     # a hand-held camera: its shake read from the background and taken out (stabilize.py); a
     # one-colour border (a plain backdrop) shows no shake, and an object on it is not one
