@@ -54,7 +54,7 @@ from reconphys.assets.procedural import make_procedural_gaussians
 from reconphys.capture.video import read_video
 from reconphys.errors import InputError
 from reconphys.models.gaussian_shipped import load_gaussian_predictor
-from reconphys.models.mask_segmenter import bfloat16_supported, native_bfloat16, segment_clip
+from reconphys.models.mask_segmenter import bfloat16_supported, native_bfloat16, rated_segment_clip
 from reconphys.physics.anchors import farthest_point_sampling, farthest_point_sampling_reference
 from reconphys.pipeline.predict import predict
 from reconphys.render.video import write_mp4
@@ -106,7 +106,7 @@ class SegmenterClock:
                 if self.bfloat16 is None and self.track and self.colours:
                     return self._segment(frames)
                 model = samples._segmenter()
-                return segment_clip(
+                return rated_segment_clip(
                     model, frames, bfloat16=self.bfloat16, track=self.track, colours=self.colours
                 )
             finally:

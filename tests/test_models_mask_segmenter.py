@@ -21,8 +21,11 @@ from reconphys.data import DropDataset, GeneratedDropDataset, make_dataset, make
 from reconphys.errors import InputError
 from reconphys.models.mask_colours import colour_refined, near_object
 from reconphys.models.mask_segmenter import (
+    EXPECTED_IOU,
     MAIN_BLOB_SHARE,
+    MASKS_WARN_IOU,
     SHIPPED_MASKS_PATHS,
+    UNSURE_LOGIT,
     Box,
     MaskSegmenter,
     SegmenterConfig,
@@ -32,8 +35,11 @@ from reconphys.models.mask_segmenter import (
     frame_inputs,
     keep_main_blob,
     load_mask_segmenter,
+    mask_rating,
     native_bfloat16,
+    rated_segment_clip,
     segment_clip,
+    segmented_size,
     shipped_fingerprint,
     tracked_logits,
 )
@@ -132,6 +138,39 @@ def test_the_main_blob_on_the_bounding_box_is_the_whole_frames():
         assert torch.equal(keep_main_blob(masks), torch.stack(expected))
 
 
+def test_the_masks_rating_counts_the_unsure_pixels_at_the_outline():
+    """mask_rating: the pixels within UNSURE_BAND_PX (a square's reach: scipy's dilation by a
+    square) of the masks whose |logit| < UNSURE_LOGIT, over the masks' area, on EXPECTED_IOU's
+    line; a sure clip gets no warning, an unsure one does, naming --masks."""
+    from scipy import ndimage
+
+    masks = torch.zeros(4, 40, 40, dtype=torch.bool)
+    masks[:, 10:22, 12:26] = True
+    distance = torch.from_numpy(
+        ndimage.distance_transform_edt(~masks.numpy(), sampling=[1e9, 1, 1])
+    )
+    sure = torch.where(masks, 8.0, -8.0)
+    rating = mask_rating(sure, masks)
+    assert rating["unsure_share"] == 0.0 and rating["expected_iou"] == 1.0
+    assert "warning" not in rating
+    soft = torch.where(masks, 8.0, -3.0 * distance.float())  # −3 one pixel out, −6 two out
+    soft[:, 10, 12:26] = 1.0  # the top row inside: unsure too
+    band = ndimage.binary_dilation(masks.numpy(), np.ones((1, 5, 5), bool))
+    unsure = (soft.abs().numpy() < UNSURE_LOGIT) & band
+    share = unsure.sum() / masks.sum().item()
+    rating = mask_rating(soft, masks)
+    assert rating["unsure_share"] == pytest.approx(share, abs=1e-4) and share > 0
+    expected = EXPECTED_IOU[0] - EXPECTED_IOU[1] * share
+    assert rating["expected_iou"] == pytest.approx(expected, abs=1e-3)
+    low, high = rating["expected_iou_10_90"]
+    assert low < rating["expected_iou"] < high
+    shaky = torch.where(masks, 1.0, -1.0)  # every pixel near the outline unsure
+    shaky_rating = mask_rating(shaky, masks)
+    assert (
+        shaky_rating["expected_iou"] < MASKS_WARN_IOU and "--masks DIR" in shaky_rating["warning"]
+    )
+
+
 def test_any_image_size_and_mirror_equivariance_of_the_padding():
     model = MaskSegmenter(SegmenterConfig(channels=(8, 8, 8, 8))).eval()
     for height, width in ((30, 22), (9, 41), (64, 64)):
@@ -161,8 +200,12 @@ def test_a_large_clip_is_segmented_at_the_networks_scale(realistic_views):
     assert not torch.allclose(clip_logits(model, big, max_side=128), resampled[:, 0], atol=0.1)
     for frames, truth in realistic_views:  # at 192 px, above MAX_SIDE: 0.76, 0.91
         big_truth = truth.repeat_interleave(3, 1).repeat_interleave(3, 2)
-        masks = segment_clip(model, frames.repeat_interleave(3, 1).repeat_interleave(3, 2))
+        big = frames.repeat_interleave(3, 1).repeat_interleave(3, 2)
+        masks, rating = rated_segment_clip(model, big)
         assert masks.shape == big_truth.shape and iou(masks, big_truth) > 0.7
+        # clip_logits' own resampling, and the rating at the segmented size
+        assert torch.equal(masks, keep_main_blob(clip_logits(model, big, colours=True) > 0).float())
+        assert rating == rated_segment_clip(model, segmented_size(big))[1]
 
 
 def test_a_recording_without_masks_or_plate_goes_through_the_segmenter(
@@ -177,6 +220,8 @@ def test_a_recording_without_masks_or_plate_goes_through_the_segmenter(
         patch.setattr(observation_module, "subtract_background", None)
         observation = load_observation(video, segment=segment_frames, camera="dataset")
     assert observation.mask_source.startswith("mask segmenter")
+    assert observation.mask_rating == segment_frames(observation.recording)[1]
+    assert 0.0 <= observation.mask_rating["expected_iou"] <= 1.0
     assert iou(observation.masks, truth) > 0.7
     outside = observation.masks < 0.5
     assert float(observation.frames[outside].abs().max()) == 0.0  # background set to black

@@ -82,6 +82,7 @@ class Observation:
     time_resampling: str = "the recorded frames"  # how frames at frame_dt were made (video.py)
     recorded_size: tuple[int, int] | None = None  # (width, height) as filmed (None: = size)
     camera_shake: dict | None = None  # the camera's shake read and taken out (stabilize.py)
+    mask_rating: dict | None = None  # how sure the segmenter is of its masks (None: not segmented)
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -111,6 +112,7 @@ def stored_observation(
     masks: Tensor | None = None,  # [T, H, W] in {0, 1}; None: the black backdrop subtracted
     mask_source: str | None = None,
     fall_fit_px: float = FALL_FIT_PX,  # the masks' pixel error (SEGMENTER_FALL_FIT_PX: segmented)
+    mask_rating: dict | None = None,  # how sure a segmenter is of ``masks``
 ) -> Observation:
     """An observation of frames already in memory (a dataset view, ground z = 0): on a black
     backdrop, or with ``masks`` from elsewhere (a realistic scene), checked as any recording's."""
@@ -134,6 +136,7 @@ def stored_observation(
         recorded_frames=frames.shape[0],
         black_backdrop=black,
         fall_fit_px=fall_fit_px,
+        mask_rating=mask_rating,
     )
 
 
@@ -194,7 +197,8 @@ def load_observation(
     # dropped. "auto": read from the masks (an object held still, then falling from rest)
     end: float | None = None,  # seconds into the recording: frames after it dropped (None:
     # CLIP_FRAMES frames from the start, as long as the data's clips; the rest is not decoded)
-    segment: Callable[[Tensor], Tensor] | None = None,  # frames [T, H, W, 3] → masks [T, H, W]
+    segment: Callable[[Tensor], Tensor | tuple[Tensor, dict]] | None = None,  # frames [T, H, W,
+    # 3] → masks [T, H, W], or the masks and how sure they are (the Observation's mask_rating)
     min_frames: int = 0,  # fewer frames after resampling: refused before masks and camera
 ) -> Observation:
     """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input;
@@ -259,7 +263,7 @@ def load_observation(
         all_masks = None
         mask_source = ""
     recorded = raw.shape[0]
-    fit_px = FALL_FIT_PX
+    fit_px, rating = FALL_FIT_PX, None
     if not np.array_equal(picks, np.arange(recorded)):  # else every frame: no copy
         raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3]).float().div_(255.0)  # as numpy's float32 / 255
@@ -303,6 +307,8 @@ def load_observation(
             black = float(colour.max()) <= BLACK_LEVEL
         if segment is not None and not (uniform and _plausible(chosen)):
             chosen = segment(rgb)  # a floor, a wall in view: the background read from the clip
+            if isinstance(chosen, tuple):
+                chosen, rating = chosen
             mask_source = (
                 "mask segmenter and the clip's own colours (no clean plate; the border colour is "
                 "not the backdrop)"
@@ -379,4 +385,5 @@ def load_observation(
         start_s=start,
         time_resampling=time_resampling,
         recorded_size=recorded_size,
+        mask_rating=rating,
     )

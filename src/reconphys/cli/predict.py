@@ -190,6 +190,9 @@ def predict_command(
             f"{estimate['drop_height_m']:.2f} m above it ({drop_low:.2f}–{drop_high:.2f} m, "
             "10–90 %)"
         )
+    masks_warning = read.get("masks_rating", {}).get("warning")
+    if masks_warning:
+        typer.echo(f"warning: masks: {masks_warning}", err=True)
     velocity_warning = summary.get("initial_velocity", {}).get("warning")
     if velocity_warning:
         typer.echo(f"warning: initial velocity: {velocity_warning}", err=True)

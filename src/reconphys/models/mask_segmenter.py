@@ -34,7 +34,7 @@ from torch import Tensor
 from ..capture.window import pixel_bounds
 from ..errors import InputError
 from ..io import atomic_file, read_json
-from .mask_colours import colour_refined
+from .mask_colours import colour_refined, near_object
 
 FORMAT = "reconphys.mask_segmenter"
 VERSION = 1
@@ -58,6 +58,17 @@ OUTSIDE_LOGIT = -20.0  # the logit of a pixel outside its frame's window: backgr
 # segment_clip's steps after the network, named in the shipped fingerprint (stored masks of
 # another rule are stale): "colours-1" the clip's colour model (mask_colours.py, 2026-12-03)
 MASKS_RULE = "colours-1"
+# How sure the masks are (mask_rating; docs/usage.md#how-sure-the-masks-are): the share of
+# pixels within UNSURE_BAND_PX of the masks whose final logit is within ±UNSURE_LOGIT, over the
+# masks' area, at the segmented size. On 188 validation clips of four looks (this project's in
+# colour and grey, pybullet's and Mitsuba's renders) the masks' IoU with the truth was
+# EXPECTED_IOU[0] − EXPECTED_IOU[1] · that share, give or take EXPECTED_IOU_SD (least squares;
+# Spearman −0.90 over the clips); below MASKS_WARN_IOU predict says to check them.
+UNSURE_LOGIT = 2.0
+UNSURE_BAND_PX = 2
+EXPECTED_IOU = (1.011, 1.454)
+EXPECTED_IOU_SD = 0.044
+MASKS_WARN_IOU = 0.8
 
 
 # bfloat16 is taken where a probe runs it at least this much faster than float32 (below)
@@ -242,15 +253,10 @@ def clip_logits(
     ``colours`` adds the clip's own colour model's logit near the object (mask_colours.py; at
     the segmented size, before any resampling): what segment_clip does by default.
     """
-    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
-        raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
-    frames = frames.float()
+    frames = _checked(frames)
     height, width = frames.shape[1:3]
     if max(height, width) > max_side:
-        factor = max_side / max(height, width)
-        size = (max(1, round(height * factor)), max(1, round(width * factor)))
-        small = F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area")
-        small = small.permute(0, 2, 3, 1)
+        small = segmented_size(frames, max_side)
         logits = clip_logits(model, small, max_side, channels_last, bfloat16, track, colours)
         return F.interpolate(logits[:, None], size=(height, width), mode="bilinear")[:, 0]
     references = clip_references(frames)
@@ -415,6 +421,23 @@ def _chunk_windows(
     return windows
 
 
+def _checked(frames: Tensor) -> Tensor:  # [T ≥ 3, H, W, 3] as float32, else ValueError
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
+        raise ValueError(f"frames: expected [T ≥ 3, H, W, 3], got {list(frames.shape)}")
+    return frames.float()
+
+
+def segmented_size(frames: Tensor, max_side: int = MAX_SIDE) -> Tensor:
+    """A clip [T, H, W, 3] area-averaged to at most ``max_side`` px a side (as it is segmented);
+    unchanged when it fits."""
+    height, width = frames.shape[1:3]
+    if max(height, width) <= max_side:
+        return frames
+    factor = max_side / max(height, width)
+    size = (max(1, round(height * factor)), max(1, round(width * factor)))
+    return F.interpolate(frames.permute(0, 3, 1, 2), size=size, mode="area").permute(0, 2, 3, 1)
+
+
 def segment_clip(
     model: Segmenter,
     frames: Tensor,
@@ -426,8 +449,58 @@ def segment_clip(
     """Masks [T, H, W] in {0, 1} of a clip [T, H, W, 3] in [0, 1] (T ≥ 3, static camera): logits
     above 0 (of the clip at most ``max_side`` px; ``bfloat16``, ``track``, ``colours``: see
     clip_logits; ``colours=False`` is the network's alone), the main blob kept."""
-    logits = clip_logits(model, frames, max_side, bfloat16=bfloat16, track=track, colours=colours)
-    return keep_main_blob(logits > 0).float()
+    return rated_segment_clip(model, frames, max_side, bfloat16, track, colours)[0]
+
+
+def rated_segment_clip(
+    model: Segmenter,
+    frames: Tensor,
+    max_side: int = MAX_SIDE,
+    bfloat16: bool | None = None,
+    track: bool = True,
+    colours: bool = True,
+) -> tuple[Tensor, dict]:
+    """segment_clip's masks [T, H, W] and how sure they are (:func:`mask_rating`, at the
+    segmented size: what its numbers were fitted on)."""
+    frames = _checked(frames)
+    small = segmented_size(frames, max_side)
+    logits = clip_logits(model, small, max_side, bfloat16=bfloat16, track=track, colours=colours)
+    rating = mask_rating(logits, keep_main_blob(logits > 0))
+    if small.shape != frames.shape:  # clip_logits' own resampling of a large clip
+        size = frames.shape[1:3]
+        logits = F.interpolate(logits[:, None], size=size, mode="bilinear")[:, 0]
+    return keep_main_blob(logits > 0).float(), rating
+
+
+def mask_rating(
+    logits: Tensor,  # [T, H, W] the segmenter's final logits (the colours' look included)
+    masks: Tensor,  # [T, H, W] bool: keep_main_blob(logits > 0)
+) -> dict:
+    """How sure the masks are: ``unsure_share`` (pixels within UNSURE_BAND_PX of the masks whose
+    |logit| < UNSURE_LOGIT, over the masks' area), the mask IoU with the object it predicts
+    (``expected_iou``, EXPECTED_IOU's line, clamped to [0, 1]) and that IoU's 10–90 % interval
+    (± 1.2816 EXPECTED_IOU_SD); ``warning`` below MASKS_WARN_IOU."""
+    band = near_object(masks.cpu(), UNSURE_BAND_PX)
+    unsure = (logits.cpu().abs() < UNSURE_LOGIT) & band
+    share = float(unsure.sum()) / max(float(masks.sum()), 1.0)
+    expected = min(max(EXPECTED_IOU[0] - EXPECTED_IOU[1] * share, 0.0), 1.0)
+    spread = 1.2816 * EXPECTED_IOU_SD
+    rating = {
+        "unsure_share": round(share, 4),
+        "expected_iou": round(expected, 3),
+        "expected_iou_10_90": [
+            round(max(expected - spread, 0.0), 3),
+            round(min(expected + spread, 1.0), 3),
+        ],
+    }
+    if expected < MASKS_WARN_IOU:
+        rating["warning"] = (
+            f"the mask segmenter is unsure of this recording's masks (their IoU with the object "
+            f"is expected near {expected:.2f}): look at the outline in preview.mp4, and give masks "
+            "from a segmentation tool (--masks DIR) if it misses the object or takes in its "
+            "shadow"
+        )
+    return rating
 
 
 def keep_main_blob(masks: Tensor, share: float = MAIN_BLOB_SHARE) -> Tensor:

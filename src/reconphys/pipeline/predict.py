@@ -339,6 +339,8 @@ def predict(
         details["input"]["camera_estimate"] = observation.camera_estimate
     if observation.camera_shake is not None:
         details["input"]["camera_shake"] = observation.camera_shake
+    if observation.mask_rating is not None:  # how sure the segmenter is of its masks
+        details["input"]["masks_rating"] = observation.mask_rating
 
     return predict_observation(
         observation,

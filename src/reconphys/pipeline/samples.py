@@ -53,10 +53,10 @@ def load_sample(
     index = dataset.index_of(sample)
     item = dataset[index]
     frames = item["frames"][0].float()
-    masks = mask_source = None
+    masks = mask_source = rating = None
     fit_px = FALL_FIT_PX
     if dataset.settings.scene == "realistic":  # as a recording: no stored mask is used
-        masks = segment_frames(frames)
+        masks, rating = segment_frames(frames)
         mask_source = "mask segmenter and the clip's own colours (realistic scene)"
         fit_px = SEGMENTER_FALL_FIT_PX
     observation = stored_observation(
@@ -68,6 +68,7 @@ def load_sample(
         masks=masks,
         mask_source=mask_source,
         fall_fit_px=fit_px,
+        mask_rating=rating,
     )
     truth = SampleTruth(
         root=str(root),
@@ -132,8 +133,9 @@ def _segmenter():
     return load_mask_segmenter()
 
 
-def segment_frames(frames: Tensor) -> Tensor:  # [T, H, W, 3] in [0, 1] → [T, H, W] in {0, 1}
-    """The object's masks by the shipped mask segmenter (models/mask_segmenter.py)."""
-    from ..models.mask_segmenter import segment_clip
+def segment_frames(frames: Tensor) -> tuple[Tensor, dict]:  # [T, H, W, 3] in [0, 1]
+    """The object's masks [T, H, W] in {0, 1} by the shipped mask segmenter and how sure they are
+    (models/mask_segmenter.py: rated_segment_clip, mask_rating)."""
+    from ..models.mask_segmenter import rated_segment_clip
 
-    return segment_clip(_segmenter(), frames)
+    return rated_segment_clip(_segmenter(), frames)
