@@ -118,6 +118,24 @@ def test_summary_gives_the_spin_read_beside_the_true_one(demo_out):
     assert "estimated +0.50 (± 0.25; kept)" in line and f"true {true_roll:+.2f}" in line
 
 
+def test_summary_says_how_sure_the_masks_are(demo_out):
+    """The demo's recording goes through the mask segmenter: prediction.json rates its masks and
+    the summary gives the expected IoU and its interval (and a check when it warns)."""
+    from reconphys.pipeline.demo import summary_markdown
+
+    out, _ = demo_out
+    prediction = json.loads((out / "prediction.json").read_text())
+    rating = prediction["input"]["masks_rating"]
+    assert 0.0 <= rating["expected_iou_10_90"][0] <= rating["expected_iou"] <= 1.0
+    summary = (out / "summary.md").read_text()
+    line = next(x for x in summary.splitlines() if x.startswith("Masks:"))
+    assert f"expected near {rating['expected_iou']:.2f}" in line
+    assert ("check their outline" in line) == ("warning" in rating)
+    prediction["input"]["masks_rating"] = {**rating, "warning": "unsure"}
+    warned = summary_markdown(load_example(DEFAULT_EXAMPLE), prediction, 1.0, out)
+    assert "check their outline in the preview" in warned
+
+
 def test_demo_refuses_a_folder_it_did_not_write(tmp_path):
     out = tmp_path / "mine"
     out.mkdir()

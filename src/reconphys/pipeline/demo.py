@@ -185,6 +185,17 @@ def summary_markdown(example: Example, prediction: dict, wall_seconds: float, ou
             + f"), true {true_roll:+.2f}, from the free-fall frames rendered and compared; the "
             f"turns about the image's axes are not read (true spin {_vector(true_spin)}).",
         ]
+    rating = prediction.get("input", {}).get("masks_rating")
+    if rating is not None:
+        low, high = rating["expected_iou_10_90"]
+        lines += [
+            "",
+            f"Masks: the mask segmenter's, their IoU with the object expected near "
+            f"{rating['expected_iou']:.2f} ({low:.2f}–{high:.2f}, 10–90 %; from the share of "
+            'unsure pixels at their outline, docs/usage.md "How sure the masks are")'
+            + (": check their outline in the preview" if "warning" in rating else "")
+            + ".",
+        ]
     lines += [
         "",
         f"Geometry: {prediction['geometry']}"
