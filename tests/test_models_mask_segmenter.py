@@ -169,6 +169,8 @@ def test_the_masks_rating_counts_the_unsure_pixels_at_the_outline():
     assert (
         shaky_rating["expected_iou"] < MASKS_WARN_IOU and "--masks DIR" in shaky_rating["warning"]
     )
+    empty = mask_rating(sure, torch.zeros_like(masks))  # no object: rated as no mask at all
+    assert empty["unsure_share"] is None and empty["expected_iou"] == 0.0 and "warning" in empty
 
 
 def test_any_image_size_and_mirror_equivariance_of_the_padding():

@@ -482,11 +482,11 @@ def mask_rating(
     (± 1.2816 EXPECTED_IOU_SD); ``warning`` below MASKS_WARN_IOU."""
     band = near_object(masks.cpu(), UNSURE_BAND_PX)
     unsure = (logits.cpu().abs() < UNSURE_LOGIT) & band
-    share = float(unsure.sum()) / max(float(masks.sum()), 1.0)
+    share = float(unsure.sum()) / float(masks.sum()) if masks.any() else math.inf  # no object
     expected = min(max(EXPECTED_IOU[0] - EXPECTED_IOU[1] * share, 0.0), 1.0)
     spread = 1.2816 * EXPECTED_IOU_SD
     rating = {
-        "unsure_share": round(share, 4),
+        "unsure_share": round(share, 4) if math.isfinite(share) else None,
         "expected_iou": round(expected, 3),
         "expected_iou_10_90": [
             round(max(expected - spread, 0.0), 3),
