@@ -168,6 +168,8 @@ def read_video(
         frame = _as_rgb_or_rgba(frame, source)
         sizes.add((frame.shape[1], frame.shape[0]))
         frames.append(frame if shrink is None else shrink.submit(_fit_one, frame, max_side))
+        if shrink is not None and len(frames) > 2 * RESIZE_THREADS:  # at most that many waiting
+            frames[-2 * RESIZE_THREADS - 1] = frames[-2 * RESIZE_THREADS - 1].result()
 
     try:
         if path.suffix.lower() == ".gif":
@@ -193,7 +195,9 @@ def read_video(
                     if last is not None and len(frames) > last:
                         break
         if shrink is not None:
-            frames = [frame.result() for frame in frames]
+            frames = [
+                frame if isinstance(frame, np.ndarray) else frame.result() for frame in frames
+            ]
     except InputError:
         raise
     except Exception as e:  # decoders raise many types (OSError, RuntimeError, IndexError, ...)

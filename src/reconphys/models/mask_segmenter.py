@@ -465,11 +465,13 @@ def rated_segment_clip(
     frames = _checked(frames)
     small = segmented_size(frames, max_side)
     logits = clip_logits(model, small, max_side, bfloat16=bfloat16, track=track, colours=colours)
-    rating = mask_rating(logits, keep_main_blob(logits > 0))
+    masks = keep_main_blob(logits > 0)
+    rating = mask_rating(logits, masks)
     if small.shape != frames.shape:  # clip_logits' own resampling of a large clip
         size = frames.shape[1:3]
         logits = F.interpolate(logits[:, None], size=size, mode="bilinear")[:, 0]
-    return keep_main_blob(logits > 0).float(), rating
+        masks = keep_main_blob(logits > 0)
+    return masks.float(), rating
 
 
 def mask_rating(
