@@ -136,3 +136,35 @@ def camera_read_errors(estimate, K_true, w2c_true, centre, lowest) -> dict:
         "pitch_deg": estimate.pitch_deg,
         "fall_frames": estimate.fall_frames,
     }
+
+
+def rating_line(ratings: list[dict], ious: list[float]) -> str:
+    """How the segmenter's own rating of its masks (models/mask_segmenter.mask_rating) compares
+    with their true IoU over clips: the mean expected and true, the mean per-clip error, the
+    rank correlation, how often the 10–90 % interval holds the truth, and the clips it warns of
+    (expected < MASKS_WARN_IOU) with their true IoU."""
+    import numpy as np
+    from scipy.stats import spearmanr
+
+    from reconphys.models.mask_segmenter import MASKS_WARN_IOU
+
+    expected = np.array([r["expected_iou"] for r in ratings])
+    true = np.array(ious)
+    held = np.mean(
+        [
+            lo <= t <= hi
+            for (lo, hi), t in zip([r["expected_iou_10_90"] for r in ratings], true, strict=True)
+        ]
+    )
+    warned = expected < MASKS_WARN_IOU
+    line = (
+        f"masks' rating: expected IoU mean {expected.mean():.3f} (true {true.mean():.3f}), "
+        f"|expected − true| {np.abs(expected - true).mean():.3f} a clip, Spearman "
+        f"{spearmanr(expected, true).correlation:.2f}, the 10–90 % interval holds the truth on "
+        f"{held:.0%}; warned of {warned.mean():.0%}"
+    )
+    if warned.any():
+        line += (
+            f" (their true IoU {true[warned].mean():.3f}, the others' {true[~warned].mean():.3f})"
+        )
+    return line

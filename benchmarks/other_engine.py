@@ -474,7 +474,7 @@ def measure(args) -> None:
     from reconphys.capture.calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
     from reconphys.capture.video import read_video
     from reconphys.errors import InputError
-    from reconphys.models.mask_segmenter import load_mask_segmenter, segment_clip
+    from reconphys.models.mask_segmenter import load_mask_segmenter, rated_segment_clip
 
     torch.set_num_threads(2)
     folders = sorted(f for f in Path(args.out).iterdir() if (f / "truth.json").is_file())
@@ -488,13 +488,14 @@ def measure(args) -> None:
         decoded, *_ = read_video(folder / "video.mp4")
         height, width = true_masks.shape[1:]
         frames = torch.from_numpy(decoded[:, :height, :width, :3]).float() / 255
-        masks = segment_clip(segmenter, frames, colours=not args.no_colours)
+        masks, rating = rated_segment_clip(segmenter, frames, colours=not args.no_colours)
         camera = read_camera(folder / "camera.json", width, height)
         row = {
             "clip": folder.name,
             "object": truth["object"],
             "from_rest": truth["released_from_rest"],
             "iou": mean_mask_iou(masks, true_masks),
+            "masks_rating": rating,
         }
         if "pybullet" in stored:  # Mitsuba's clips: against pybullet's masks as well (before)
             pybullet_masks = torch.from_numpy(stored["pybullet"]).float()
@@ -574,6 +575,8 @@ PREDICT_RUNS = (
 
 
 def _report(rows: list[dict]) -> None:
+    from common import rating_line
+
     machine = platform.processor() or platform.machine()
     print(f"\n{len(rows)} clips; {machine}, torch {torch.__version__}")
     ious = np.array([r["iou"] for r in rows])
@@ -581,6 +584,8 @@ def _report(rows: list[dict]) -> None:
         f"mask IoU (segmenter): mean {ious.mean():.3f}, median {np.median(ious):.3f}, "
         f"min {ious.min():.3f}, >= 0.9: {(ious >= 0.9).mean():.0%}"
     )
+    if all("masks_rating" in r for r in rows):  # rows of runs before the rating have none
+        print(rating_line([r["masks_rating"] for r in rows], list(ious)))
     if all("iou_pybullet_masks" in r for r in rows):  # Mitsuba's clips
         print(
             "  the same masks against pybullet's of the same poses: mean "

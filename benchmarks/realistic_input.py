@@ -35,7 +35,7 @@ import time
 
 import numpy as np
 import torch
-from common import camera_read_errors, mean_mask_iou
+from common import camera_read_errors, mean_mask_iou, rating_line
 
 from reconphys.capture.calibrate import (
     FALL_FIT_PX,
@@ -45,7 +45,7 @@ from reconphys.capture.calibrate import (
 from reconphys.capture.lens import default_fov_deg
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
-from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, segment_clip
+from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, rated_segment_clip
 
 
 def centre_cut(frames, truth, K, aspect: tuple[int, int] | None):
@@ -111,13 +111,14 @@ def main() -> None:
         frames, truth = item["frames"][0], dataset.masks(index)[0].float()
         frames, truth, K = centre_cut(frames, truth, item["K"][0], aspect)
         tic = time.perf_counter()
-        masks = segment_clip(model, frames, args.max_side)
+        masks, rating = rated_segment_clip(model, frames, args.max_side)
         seconds = time.perf_counter() - tic
         median = ((frames - frames.median(0).values).norm(dim=-1) > 0.08).float()
         row = {
             "id": item["id"],
             "launch": meta["initial_state"]["launch"],
             "iou_segmenter": mean_mask_iou(masks, truth),
+            "masks_rating": rating,
             "iou_median": mean_mask_iou(median, truth),
             "segment_seconds": seconds,
         }
@@ -162,7 +163,8 @@ def main() -> None:
         f"{ious.min():.3f}), temporal median {np.mean([r['iou_median'] for r in rows]):.3f}; "
         f"segmenter {np.mean([r['segment_seconds'] for r in rows]):.2f} s a clip"
     )
-    for name in [n for n in rows[0] if isinstance(rows[0][n], dict)]:
+    print(rating_line([r["masks_rating"] for r in rows], list(ious)))
+    for name in [n for n in rows[0] if isinstance(rows[0][n], dict) and n != "masks_rating"]:
         good = [r[name] for r in rows if "scale_error" in r[name]]
         refused = len(rows) - len(good)
         if not good:
