@@ -51,6 +51,7 @@ from ..render.cameras import intrinsics_from_fov, look_at
 from .camera import CameraSpec
 from .lens import recording_fov
 from .placement import GRAVITY_MAGNITUDE, camera_centre, ray
+from .window import pixel_bounds
 
 PITCH_PRIOR_DEG = 15.0  # filmed from a little above the drop
 # Chosen on 40 realistic videos of held-out pybullet meshes (true masks, docs/usage.md): mean
@@ -187,10 +188,10 @@ def mask_track(masks: Tensor) -> _Track:
     """Centroid, bottom edge and area of every frame's mask [T, H, W] (all non-empty)."""
     centroid, bottom, width, area = [], [], [], []
     seen = masks > 0.5
-    rows, cols = seen.any(2).any(0).nonzero()[:, 0], seen.any(1).any(0).nonzero()[:, 0]
-    top, left = (int(rows[0]), int(cols[0])) if len(rows) else (0, 0)
-    if len(rows):  # found on the bounding box of every frame's mask: the same pixels, less work
-        seen = seen[:, top : int(rows[-1]) + 1, left : int(cols[-1]) + 1]
+    box = pixel_bounds(seen.any(0))  # (top, bottom, left, right)
+    top, left = (box[0], box[2]) if box is not None else (0, 0)
+    if box is not None:  # found on the bounding box of every frame's mask: the same pixels
+        seen = seen[:, box[0] : box[1], box[2] : box[3]]
     for t, mask in enumerate(seen):
         v, u = torch.nonzero(mask, as_tuple=True)
         if len(v) == 0:

@@ -31,6 +31,7 @@ from torch import Tensor
 
 from ..errors import InputError
 from .video import fit_within, list_images, read_image
+from .window import pixel_bounds
 
 DEFAULT_TOLERANCE = 0.08  # colour distance (RGB in [0, 1], Euclidean) that counts as object
 BORDER = 2  # pixels of the image border that sample the backdrop colour
@@ -249,9 +250,10 @@ def _overlap_with_first(masks: Tensor) -> Tensor:  # [T, H, W] → [T] IoU with 
     """Counted on the bounding box of every frame's mask (outside it both are empty: the same
     IoU, a few times less work on a large frame)."""
     seen = masks.detach() > 0.5
-    rows, cols = seen.any(2).any(0).nonzero()[:, 0], seen.any(1).any(0).nonzero()[:, 0]
-    if len(rows):
-        seen = seen[:, int(rows[0]) : int(rows[-1]) + 1, int(cols[0]) : int(cols[-1]) + 1]
+    bounds = pixel_bounds(seen.any(0))
+    if bounds is not None:
+        top, bottom, left, right = bounds
+        seen = seen[:, top:bottom, left:right]
     seen = seen.reshape(seen.shape[0], -1)
     inter = (seen & seen[:1]).sum(1).float()
     return inter / (seen | seen[:1]).sum(1).float().clamp_min(1)

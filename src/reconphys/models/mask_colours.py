@@ -21,6 +21,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from ..capture.window import pixel_bounds
+
 CONFIDENT_LOGIT = 4.0  # |logit| above this: a pixel the network is sure of (ensemble mean)
 BAND_PX = 8  # the refinement acts within this many pixels of the object's main blob
 MAX_SHIFT = 6.0  # the colour model's logit is clamped to ±this, then weighed by WEIGHT
@@ -95,11 +97,11 @@ def near_object(masks: Tensor, band: int = BAND_PX) -> Tensor:
         return sums.index_select(dim, upper) - sums.index_select(dim, lower)
 
     near = torch.zeros_like(masks, dtype=torch.bool)
-    rows, cols = masks.any(2).any(0).nonzero()[:, 0], masks.any(1).any(0).nonzero()[:, 0]
-    if len(rows) == 0:
+    bounds = pixel_bounds(masks.any(0))
+    if bounds is None:
         return near
-    top, left = max(int(rows[0]) - band, 0), max(int(cols[0]) - band, 0)
-    bottom, right = int(rows[-1]) + band + 1, int(cols[-1]) + band + 1  # within every mask's reach
+    top, bottom, left, right = bounds
+    top, left, bottom, right = max(top - band, 0), max(left - band, 0), bottom + band, right + band
     crop = masks[:, top:bottom, left:right].to(torch.int32)
     near[:, top:bottom, left:right] = spread(spread(crop, 2), 1) > 0
     return near
