@@ -221,6 +221,33 @@ def test_python_api_returns_the_asset(dataset, sample_id):
     assert trajectory.x.shape[-2:] == (64, 3) and bool(torch.isfinite(trajectory.x).all())
 
 
+def test_a_dataset_sample_takes_masks_and_refuses_recording_options(dataset, sample_id, tmp_path):
+    from reconphys.pipeline.samples import load_input
+
+    stored, _ = load_input(dataset, sample=sample_id)
+    # a segmentation tool's masks: the backdrop's, one pixel smaller (so they differ from it)
+    given = -torch.nn.functional.max_pool2d(-stored.masks[:, None], 3, 1, 1)[:, 0]
+    assert 0 < int(given.sum()) < int(stored.masks.sum())
+    folder = tmp_path / "masks"
+    folder.mkdir()
+    for i, mask in enumerate(given):
+        imageio.imwrite(folder / f"{i:03d}.png", (mask.numpy() * 255).astype(np.uint8))
+    observation, truth = load_input(dataset, sample=sample_id, masks=folder)
+    assert truth is not None and torch.equal(observation.masks, given)
+    assert observation.mask_source == f"mask folder {folder}"
+    # the frames the network reads are the recording within the given masks
+    assert torch.equal(observation.frames, observation.recording * given[..., None])
+    (folder / "000.png").unlink()  # one mask short: refused, naming the folder
+    with pytest.raises(InputError, match="mask images for"):
+        load_input(dataset, sample=sample_id, masks=folder)
+    for option in ({"camera": "c.json"}, {"fps": 30.0}, {"fov_deg": 50.0}, {"background": "b"}):
+        with pytest.raises(InputError, match="is for recordings, not dataset samples"):
+            load_input(dataset, sample=sample_id, **option)
+    result, out = _predict([dataset, "--sample", sample_id, "--camera", "c.json"], tmp_path)
+    assert result.exit_code != 0 and "--camera is for recordings" in result.output
+    assert not out.exists()
+
+
 def test_resampling_picks_the_nearest_frames():
     assert resample_indices(30, 1 / 0.03, 0.03).tolist() == list(range(30))
     assert resample_indices(59, 2 / 0.03, 0.03).tolist() == list(range(0, 59, 2))

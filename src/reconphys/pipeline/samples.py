@@ -14,6 +14,7 @@ from torch import Tensor
 from ..assets.asset import Asset
 from ..capture import Observation, load_observation
 from ..capture.calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX
+from ..capture.masks import read_mask_folder
 from ..capture.observation import stored_observation
 from ..errors import InputError
 from ..physics import ATTRIBUTES
@@ -37,9 +38,14 @@ def is_dataset(path: str | os.PathLike) -> bool:
 
 
 def load_sample(
-    root: str | os.PathLike, sample: str | None, view: int = 0
+    root: str | os.PathLike,
+    sample: str | None,
+    view: int = 0,
+    masks: str | os.PathLike | None = None,  # folder of mask images of the view's frames
 ) -> tuple[Observation, SampleTruth]:
-    """The stored frames of ``sample``'s ``view`` (black backdrop, ground z = 0) and its truth."""
+    """The stored frames of ``sample``'s ``view`` (black backdrop, ground z = 0) and its truth;
+    the object's masks from ``masks`` when given (one image per stored frame), else from the
+    black backdrop (the plain look) or the mask segmenter (the realistic look)."""
     from ..data.dataset import DropDataset
     from ..data.storage import read_manifest
 
@@ -53,9 +59,12 @@ def load_sample(
     index = dataset.index_of(sample)
     item = dataset[index]
     frames = item["frames"][0].float()
-    masks = mask_source = rating = None
+    folder, masks, mask_source, rating = masks, None, None, None
     fit_px = FALL_FIT_PX
-    if dataset.settings.scene == "realistic":  # as a recording: no stored mask is used
+    if folder is not None:  # a segmentation tool's masks, as for a recording
+        masks = read_mask_folder(folder, *frames.shape[:3])
+        mask_source = f"mask folder {folder}"
+    elif dataset.settings.scene == "realistic":  # as a recording: no stored mask is used
         masks, rating = segment_frames(frames)
         mask_source = "mask segmenter and the clip's own colours (realistic scene)"
         fit_px = SEGMENTER_FALL_FIT_PX
@@ -97,16 +106,27 @@ def load_input(
     min_frames: int = 0,  # a recording with fewer (after resampling) is refused at once
 ) -> tuple[Observation, SampleTruth | None]:
     """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
-    and the sample's truth for a dataset input (None otherwise). Raises InputError."""
+    and the sample's truth for a dataset input (None otherwise). Raises InputError, also for a
+    recording's option given with a dataset sample (its camera and frame rate are stored): an
+    option that would be ignored is refused, not dropped in silence."""
     path = Path(input)
     if not path.exists():
         raise InputError("not found", source=str(path))
     if is_dataset(path):
-        if start != 0.0 or end is not None:
+        given = {
+            "--start/--end": start != 0.0 or end is not None,
+            "--background": background is not None,
+            "--camera": camera is not None,
+            "--fps": fps is not None,
+            "--fov": fov_deg is not None,
+        }
+        for option in (name for name, used in given.items() if used):
             raise InputError(
-                "--start/--end are for recordings, not dataset samples", source=str(path)
+                f"{option} is for recordings, not dataset samples (a sample's camera and frame "
+                "rate are stored with it)",
+                source=str(path),
             )
-        return load_sample(path, sample, view)
+        return load_sample(path, sample, view, masks)
     if sample is not None:
         raise InputError("--sample is for dataset folders (with manifest.json)", source=str(path))
     observation = load_observation(
