@@ -47,6 +47,7 @@ from .stabilize import MAX_SHAKE_SHARE, Shake, crop_margin, read_shake, steady
 from .video import (
     VIDEO_SUFFIXES,
     WORK_MAX_SIDE,
+    hdr_transfer,
     read_focal_35mm,
     read_frame_folder,
     read_video,
@@ -83,6 +84,7 @@ class Observation:
     recorded_size: tuple[int, int] | None = None  # (width, height) as filmed (None: = size)
     camera_shake: dict | None = None  # the camera's shake read and taken out (stabilize.py)
     mask_rating: dict | None = None  # how sure the segmenter is of its masks (None: not segmented)
+    hdr: str | None = None  # an HDR video's transfer curve ("HLG", "PQ"), read as SDR; None: SDR
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -220,7 +222,7 @@ def load_observation(
     # decode no further than that, unless a mask folder must match the recording frame for frame
     until = None if masks is not None else read_end
     side = AUTO_MAX_SIDE if auto else WORK_MAX_SIDE  # a phone's 1080p: read smaller
-    times = stamps = slowed = None
+    times = stamps = slowed = hdr = None
     if path.is_dir():
         count = None if until is None else math.ceil(until * (fps or 1.0 / frame_dt)) + 1
         (raw, recorded_size), recorded_fps = read_frame_folder(path, count, side), None
@@ -232,6 +234,7 @@ def load_observation(
         raw, recorded_fps, times, recorded_size, stamps = read_video(
             path, None if fps and slowed is None else until, side
         )
+        hdr = hdr_transfer(path)  # read as SDR by read_video (video.hdr_to_sdr)
     else:
         raise InputError(
             f"expected a video ({', '.join(VIDEO_SUFFIXES)}) or a folder of frames",
@@ -386,4 +389,5 @@ def load_observation(
         time_resampling=time_resampling,
         recorded_size=recorded_size,
         mask_rating=rating,
+        hdr=hdr,
     )

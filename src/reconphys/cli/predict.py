@@ -175,6 +175,8 @@ def predict_command(
     read = summary.get("input", {})
     if read.get("start_how", "").startswith("read from the masks"):
         typer.echo(f"release read from the masks at {read['start_s']:.3f} s: frame 0 from there")
+    if read.get("dynamic_range"):  # an HDR phone video, read as SDR
+        typer.echo(f"colours: {read['dynamic_range']}")
     estimate = read.get("camera_estimate")
     if estimate is not None:
         low, high = estimate["size_factor_10_90"]

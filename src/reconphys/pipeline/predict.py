@@ -39,6 +39,7 @@ from ..capture.calibrate import check_touch
 from ..capture.masks import FIRST_FRAMES_AREA_CHANGE, first_frames_area_change
 from ..capture.observation import too_short
 from ..capture.placement import estimate_ground_height, fit_to_mask, placement_scores
+from ..capture.video import SDR_WHITE_NITS
 from ..errors import InputError
 from ..models.gaussian_shipped import (
     LoadedGaussianPredictor,
@@ -341,6 +342,11 @@ def predict(
         details["input"]["camera_shake"] = observation.camera_shake
     if observation.mask_rating is not None:  # how sure the segmenter is of its masks
         details["input"]["masks_rating"] = observation.mask_rating
+    if observation.hdr is not None:  # an HDR phone video, read as SDR (capture/video.py)
+        details["input"]["dynamic_range"] = (
+            f"HDR ({observation.hdr}) read as SDR: {SDR_WHITE_NITS:g} cd/m² made white, BT.2020 "
+            "turned into BT.709, the sRGB curve, brighter highlights clipped"
+        )
 
     return predict_observation(
         observation,
