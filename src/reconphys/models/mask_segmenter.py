@@ -62,12 +62,16 @@ MASKS_RULE = "colours-1"
 # pixels within UNSURE_BAND_PX of the masks whose final logit is within ±UNSURE_LOGIT, over the
 # masks' area, at the segmented size. On 188 validation clips of four looks (this project's in
 # colour and grey, pybullet's and Mitsuba's renders) the masks' IoU with the truth was
-# EXPECTED_IOU[0] − EXPECTED_IOU[1] · that share, give or take EXPECTED_IOU_SD (least squares;
-# Spearman −0.90 over the clips); below MASKS_WARN_IOU predict says to check them.
+# EXPECTED_IOU[0] − EXPECTED_IOU[1] · that share (least squares; Spearman −0.90 over the clips);
+# below MASKS_WARN_IOU predict says to check them. The 10–90 % interval is ±1.2816
+# EXPECTED_IOU_SD, the spread on a look the line never saw: the RMS error on Mitsuba's validation
+# renders of a line fitted on the other looks' clips (0.075; the residual SD over all 188 was
+# 0.044, whose interval held the truth on 55 % of Mitsuba's test renders: a user's own video is
+# a look no training render had).
 UNSURE_LOGIT = 2.0
 UNSURE_BAND_PX = 2
 EXPECTED_IOU = (1.011, 1.454)
-EXPECTED_IOU_SD = 0.044
+EXPECTED_IOU_SD = 0.075
 MASKS_WARN_IOU = 0.8
 
 
