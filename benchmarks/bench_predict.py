@@ -21,7 +21,9 @@ without the clip's colour model (models/mask_colours.py; its milliseconds printe
 segmenter runs in bfloat16 (``native_bfloat16``: the CPU runs it and a probe finds it faster),
 the same in float32 (the fast path's twin), and where the CPU runs bfloat16 but the probe chose
 float32, the same in bfloat16 (the ratio printed either way); then the same clip resized to
-1080 × 1080 (a phone's shorter side), then — once, not best of — a cold ``reconphys predict
+1080 × 1080 (a phone's shorter side), the same in the middle of a 3840 × 2160 frame (a phone's
+4K) and as an iPhone's HDR (HLG, HEVC 10-bit: read as SDR), then — once, not best of — a cold
+``reconphys predict
 --no-refine --preview-frames 0`` process on the mp4, what a user waits for (interpreter, imports
 and model loads included).
 
@@ -46,6 +48,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from common import machine_description
+from hdr_input import write_hevc
 from PIL import Image
 
 import reconphys.pipeline.samples as samples
@@ -127,6 +130,19 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
     frames, fps = read_video(video)[:2]
     large = np.stack([np.asarray(Image.fromarray(f).resize((1080, 1080))) for f in frames])
     write_mp4(tmp / "large.mp4", large[..., :3], fps=fps or 1 / 0.03)
+    # a phone's 4K (the 1080 × 1080 frames in the middle of 3840 × 2160, its edges repeated)
+    wide = [
+        np.pad(
+            np.asarray(Image.fromarray(f).resize((2160, 2160))),
+            ((0, 0), (840, 840), (0, 0)),
+            mode="edge",
+        )
+        for f in large[..., :3]
+    ]
+    write_mp4(tmp / "4k.mp4", np.stack(wide), fps=fps or 1 / 0.03)
+    del wide
+    # an iPhone's HDR: the 1080 × 1080 frames as HLG, HEVC 10-bit 4:2:0 (hdr_input.py)
+    write_hevc(large[..., :3], tmp / "hlg.mov", "hlg", "420", "18", lossless=False)
     print(f"# realistic: {data} sample {sample}, view 0, the mp4 alone")
     print(
         f"{'case':16s} {'size':>9s} {'gaussians':>9s} {'anchors':>7s} "
@@ -138,6 +154,8 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
         ("mp4, whole frames", video, None, False, True),  # the twin of following the object
         ("mp4, no colours", video, None, True, False),  # the network's masks alone
         ("mp4 1080×1080", tmp / "large.mp4", None, True, True),
+        ("mp4 3840×2160", tmp / "4k.mp4", None, True, True),
+        ("HLG 1080×1080", tmp / "hlg.mov", None, True, True),
     ]
     if native_bfloat16():  # the segmenter's bfloat16 fast path is taken: time its twin too
         cases.insert(1, ("mp4, float32 seg", video, False, True, True))

@@ -2,7 +2,7 @@
 
 For view 0 of the first ``--limit`` test samples of a realistic-look dataset, the stored frames
 are written again as HEVC 10-bit: as SDR (BT.709), and as HLG and PQ by ITU-R BT.2100's formulas
-(tests/test_capture_hdr.py's encoder, independent of the reader); each is read back by
+(tests/test_capture_hdr.bt2100_codes, independent of the reader); each is read back by
 ``read_video`` — the HDR ones as SDR (the default) and, with ``--as-stored``, as they are stored
 (the reading before 2026-12-03) — and segmented by the shipped mask segmenter. Prints per clip
 and in the mean the mask IoU against the true masks and the frames' mean |difference| from the
@@ -32,7 +32,7 @@ from reconphys.data import DropDataset
 from reconphys.models.mask_segmenter import load_mask_segmenter, rated_segment_clip
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_capture_hdr import _hdr_codes  # BT.2100's formulas, in numpy
+from test_capture_hdr import bt2100_codes  # BT.2100's formulas, in numpy
 
 TRANSFERS = {"hlg": "arib-std-b67", "pq": "smpte2084", "sdr": "bt709"}
 
@@ -40,24 +40,28 @@ TRANSFERS = {"hlg": "arib-std-b67", "pq": "smpte2084", "sdr": "bt709"}
 def write_hevc(frames: np.ndarray, path: Path, look: str, chroma: str, crf: str, lossless: bool):
     """[T, H, W, 3] sRGB uint8 → a 10-bit HEVC file of ``look`` (sdr, hlg, pq), tagged."""
     count, height, width = frames.shape[:3]
-    if look == "sdr":  # ffmpeg's own conversion to BT.709 Y'CbCr
+    params = ":lossless=1" if lossless else ""
+    if look == "sdr":  # ffmpeg's own conversion to BT.709 Y'CbCr, the output so tagged
         source, pixels = ["-pix_fmt", "rgb24"], frames.tobytes()
-        convert = ["-vf", f"format=yuv{chroma}p10le"]
+        convert = ["-vf", f"scale=out_color_matrix=bt709:out_range=tv,format=yuv{chroma}p10le"]
         primaries, matrix = "bt709", "bt709"
     else:
-        codes = _hdr_codes(frames, look.upper())  # [T, 3, H, W] Y'CbCr 4:4:4
+        codes = bt2100_codes(frames, look.upper())  # [T, 3, H, W] Y'CbCr 4:4:4
         luma, colour = codes[:, 0], codes[:, 1:]
-        if chroma == "420":  # each 2 × 2 block's mean, as an encoder subsamples
+        source = ["-pix_fmt", f"yuv{chroma}p10le", "-color_range", "tv"]
+        if chroma == "420":  # each 2 × 2 block's mean, its chroma sited at the block's centre
             colour = colour.reshape(count, 2, height // 2, 2, width // 2, 2).mean((3, 5))
             colour = np.rint(colour).astype("<u2")
+            source += ["-chroma_sample_location", "center"]
+            params += ":chromaloc=1"
         pixels = b"".join(luma[t].tobytes() + colour[t].tobytes() for t in range(count))
-        source, convert = ["-pix_fmt", f"yuv{chroma}p10le", "-color_range", "tv"], []
+        convert = []
         primaries, matrix = "bt2020", "bt2020nc"
     tags = ["-color_primaries", primaries, "-color_trc", TRANSFERS[look], "-colorspace", matrix]
-    params = f"colorprim={primaries}:transfer={TRANSFERS[look]}:colormatrix={matrix}"
-    params += ":lossless=1" if lossless else ""
+    params = f"colorprim={primaries}:transfer={TRANSFERS[look]}:colormatrix={matrix}" + params
     command = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "rawvideo"]
-    command += [*source, "-s", f"{width}x{height}", "-r", "33.333", *tags, "-i", "-", *convert]
+    command += [*source, "-s", f"{width}x{height}", "-r", "33.333"]
+    command += [*(tags if look != "sdr" else []), "-i", "-", *convert, *tags]
     command += ["-c:v", "libx265", "-crf", crf, "-x265-params", params + ":log-level=error"]
     subprocess.run([*command, "-tag:v", "hvc1", str(path)], input=pixels, check=True)
 

@@ -2,9 +2,9 @@
 
 The clips are written here from sRGB frames by ITU-R BT.2100's and BT.2408's formulas, in numpy
 (independent of the zimg conversion that reads them): SDR white at 203 cd/m², BT.709 → BT.2020
-in linear light, the PQ curve, or HLG on the 1000 cd/m² reference display (system gamma 1.2),
-then Y'CbCr (BT.2020 non-constant luminance, 10-bit narrow range, 4:4:4), stored losslessly
-(FFV1) with the stream's colour tags.
+in linear light, the PQ curve, or HLG on the 1000 cd/m² reference display (system gamma 1.2,
+by the luminance), then Y'CbCr (non-constant luminance, 10-bit narrow range, 4:4:4), stored
+losslessly (FFV1) with the stream's colour tags.
 """
 
 from __future__ import annotations
@@ -22,10 +22,13 @@ from reconphys.capture import load_observation
 from reconphys.cli import app
 from reconphys.render.video import run_ffmpeg
 
+needs_zscale = pytest.mark.skipif(
+    not video_module._has_zscale(), reason="this ffmpeg has no zscale (IMAGEIO_FFMPEG_EXE)"
+)
 BT709_TO_BT2020 = np.array(
     [[0.6274, 0.3293, 0.0433], [0.0691, 0.9195, 0.0114], [0.0164, 0.0880, 0.8956]]
 )
-LUMA_2020 = np.array([0.2627, 0.6780, 0.0593])
+LUMA = {"bt2020": np.array([0.2627, 0.6780, 0.0593]), "bt709": np.array([0.2126, 0.7152, 0.0722])}
 
 
 def _pq(nits: np.ndarray) -> np.ndarray:  # SMPTE ST 2084 inverse EOTF: cd/m² → signal
@@ -37,7 +40,7 @@ def _pq(nits: np.ndarray) -> np.ndarray:  # SMPTE ST 2084 inverse EOTF: cd/m² �
 
 def _hlg(nits: np.ndarray) -> np.ndarray:  # display light [..., 3] → HLG signal (Lw 1000, γ 1.2)
     gamma, peak = 1.2, 1000.0
-    luminance = np.clip(nits @ LUMA_2020, 1e-9, None)[..., None]
+    luminance = np.clip(nits @ LUMA["bt2020"], 1e-9, None)[..., None]
     scene = (luminance / peak) ** ((1 - gamma) / gamma) * np.clip(nits, 0, None) / peak
     a, b, c = 0.17883277, 0.28466892, 0.55991073
     low = np.sqrt(3 * scene)
@@ -45,32 +48,39 @@ def _hlg(nits: np.ndarray) -> np.ndarray:  # display light [..., 3] → HLG sign
     return np.where(scene <= 1 / 12, low, high)
 
 
-def _hdr_codes(frames: np.ndarray, curve: str) -> np.ndarray:
-    """[T, H, W, 3] sRGB uint8 → [T, 3, H, W] uint16 Y'CbCr codes of the HDR signal."""
+def bt2100_codes(frames: np.ndarray, curve: str, primaries: str = "bt2020") -> np.ndarray:
+    """[T, H, W, 3] sRGB uint8 → [T, 3, H, W] uint16 Y'CbCr codes of the HDR signal of ``curve``
+    ("HLG", "PQ") in ``primaries`` ("bt2020"; "bt709" for PQ: the colours as they are)."""
     c = frames.astype(np.float64) / 255.0
     linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-    nits = 203.0 * linear @ BT709_TO_BT2020.T
+    nits = 203.0 * (linear @ BT709_TO_BT2020.T if primaries == "bt2020" else linear)
     signal = _pq(nits) if curve == "PQ" else _hlg(nits)
-    luma = signal @ LUMA_2020
-    cb = (signal[..., 2] - luma) / 1.8814
-    cr = (signal[..., 0] - luma) / 1.4746
+    kr, _, kb = LUMA[primaries]
+    luma = signal @ LUMA[primaries]
+    cb = (signal[..., 2] - luma) / (2 * (1 - kb))
+    cr = (signal[..., 0] - luma) / (2 * (1 - kr))
     codes = np.stack([64 + 876 * luma, 512 + 896 * cb, 512 + 896 * cr], axis=1)
     return np.clip(np.rint(codes), 0, 1023).astype("<u2")
 
 
-def _write_hdr(path, frames: np.ndarray, curve: str | None) -> None:
-    """An FFV1 clip of ``frames`` (sRGB) as the HDR signal of ``curve``, its stream tagged so;
-    with curve None the same HLG codes without tags (a clip that does not say it is HDR)."""
-    codes = _hdr_codes(frames, curve or "HLG")
+def _write_hdr(
+    path, frames: np.ndarray, curve: str | None, primaries: str = "bt2020", tags: str = "all"
+) -> None:
+    """An FFV1 clip of ``frames`` (sRGB) as the HDR signal of ``curve``, its stream tagged with
+    its matrix, primaries and curve (``tags`` "all"), the curve alone ("transfer"), or — with
+    curve None — nothing (the same HLG codes: a clip that does not say it is HDR)."""
+    codes = bt2100_codes(frames, curve or "HLG", primaries)
     height, width = frames.shape[1:3]
-    tags = []
+    given = []
     if curve is not None:
-        transfer = {"HLG": "arib-std-b67", "PQ": "smpte2084"}[curve]
-        tags = ["-color_primaries", "bt2020", "-color_trc", transfer, "-colorspace", "bt2020nc"]
+        given = ["-color_trc", {"HLG": "arib-std-b67", "PQ": "smpte2084"}[curve]]
+        if tags == "all":
+            matrix = "bt2020nc" if primaries == "bt2020" else "bt709"
+            given += ["-color_primaries", primaries, "-colorspace", matrix]
     raw = path.with_suffix(".yuv")
     raw.write_bytes(codes.tobytes())
     arguments = ["-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "yuv444p10le"]
-    arguments += ["-s", f"{width}x{height}", "-r", "33.333", *tags, "-color_range", "tv"]
+    arguments += ["-s", f"{width}x{height}", "-r", "33.333", *given, "-color_range", "tv"]
     run = run_ffmpeg([*arguments, "-i", str(raw), "-c:v", "ffv1", str(path)])
     assert run.returncode == 0, run.stderr
 
@@ -79,9 +89,9 @@ def test_the_clips_codes_are_bt2100s():
     """This file's encoder against codes worked out by hand from BT.2100: SDR white (203 cd/m²)
     is HLG's 75 % (code 721) and PQ's 58.07 % (573); sRGB grey 128 (43.8 cd/m²) 476 and 439."""
     greys = np.array([255, 128], np.uint8)[:, None, None, None].repeat(3, axis=-1)
-    assert _hdr_codes(greys, "HLG")[:, 0, 0, 0].tolist() == [721, 476]
-    assert _hdr_codes(greys, "PQ")[:, 0, 0, 0].tolist() == [573, 439]
-    assert (_hdr_codes(greys, "PQ")[:, 1:] == 512).all()  # no colour in a grey
+    assert bt2100_codes(greys, "HLG")[:, 0, 0, 0].tolist() == [721, 476]
+    assert bt2100_codes(greys, "PQ")[:, 0, 0, 0].tolist() == [573, 439]
+    assert (bt2100_codes(greys, "PQ")[:, 1:] == 512).all()  # no colour in a grey
 
 
 def _patches(colours: np.ndarray) -> np.ndarray:  # [16, 3] → [2, 32, 32, 3] 8-px patches
@@ -100,6 +110,7 @@ INNER = np.array(
 
 
 @pytest.mark.parametrize("curve", ["HLG", "PQ"])
+@needs_zscale
 def test_an_hdr_video_reads_as_its_sdr_frames(tmp_path, curve):
     generator = np.random.default_rng(3)
     colours = np.concatenate([INNER, generator.integers(20, 256, (8, 3), dtype=np.uint8)])
@@ -125,34 +136,38 @@ def test_an_hdr_video_reads_as_its_sdr_frames(tmp_path, curve):
     assert np.abs(stored - frames).mean() > 10
 
 
-def test_pq_reads_as_zimg_reads_it(tmp_path):
-    """Against an independent implementation of the same conversion, where ffmpeg has it:
-    zimg (ffmpeg's zscale) turns PQ into SDR as hdr_to_sdr does (within 2 levels); for HLG it
-    agrees on greys only (it raises each channel to the system gamma, BT.2100 the luminance)."""
-    run = run_ffmpeg(["-v", "error", "-filters"])
-    if " zscale " not in run.stdout:
-        pytest.skip("this ffmpeg has no zscale")
-    generator = np.random.default_rng(4)
+@needs_zscale
+def test_an_hdr_videos_colour_tags_are_followed(tmp_path):
+    """PQ in BT.709's primaries and matrix, so tagged, reads in them; a stream that names its
+    curve alone is taken as BT.2020 (BT.2100's), as a phone writes it."""
+    generator = np.random.default_rng(5)
     frames = _patches(np.concatenate([INNER, generator.integers(20, 256, (8, 3), np.uint8)]))
-    greys = _patches(np.repeat(np.linspace(20, 255, 16).astype(np.uint8)[:, None], 3, axis=1))
-    sdr = "zscale=t=linear:npl=203:p=bt709,format=gbrpf32le,"
-    sdr += "zscale=t=iec61966-2-1:r=full,format=gbrp"
-    for curve, clip, filters in (
-        ("PQ", frames, sdr),
-        ("HLG", greys, "zscale=t=smpte2084:npl=1000," + sdr),  # HLG via PQ at 1000 cd/m²
-    ):
-        path = tmp_path / f"{curve}.mkv"
-        _write_hdr(path, clip, curve)
-        command = ["-v", "error", "-i", str(path), "-vf", filters, "-f", "rawvideo"]
-        run = subprocess.run(
-            [imageio_ffmpeg.get_ffmpeg_exe(), *command, "-pix_fmt", "rgb24", "-"],
-            capture_output=True,
-        )
-        assert run.returncode == 0, run.stderr
-        zimg = np.frombuffer(run.stdout, np.uint8).reshape(clip.shape).astype(int)
-        assert np.abs(video_module.read_video(path)[0].astype(int) - zimg).max() <= 2
+    path = tmp_path / "bt709.mkv"
+    _write_hdr(path, frames, "PQ", primaries="bt709")
+    assert np.abs(video_module.read_video(path)[0].astype(int) - frames).max() <= 3
+    path = tmp_path / "curve_alone.mkv"
+    _write_hdr(path, frames, "PQ", tags="transfer")
+    assert video_module.hdr_transfer(path) == "PQ"
+    assert np.abs(video_module.read_video(path)[0].astype(int) - frames).max() <= 3
+    line = "Stream #0:0: Video: hevc (Main 10), yuv420p10le(tv, {}, progressive), 64x64"
+    assert video_module._unknown_colour_tags(line.format("bt2020nc/bt2020/arib-std-b67")) == ()
+    assert video_module._unknown_colour_tags(line.format("unknown/bt2020/smpte2084")) == ("min",)
+    assert video_module._unknown_colour_tags(line.format("arib-std-b67")) == ("min", "pin")
 
 
+def test_a_video_with_tags_that_are_not_utf8_reads(tmp_path):
+    """A title in Latin-1 (bytes that are not UTF-8) in ffmpeg's description of the file is
+    replaced, not raised on: the clip reads as before."""
+    path = tmp_path / "latin1.avi"
+    command = [imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i"]
+    command += ["testsrc=size=32x32:rate=30:duration=0.2", "-metadata", b"title=Caf\xe9 drop"]
+    subprocess.run([*command, "-c:v", "mjpeg", str(path)], check=True, capture_output=True)
+    assert b"Caf\xe9" in path.read_bytes()
+    assert video_module.hdr_transfer(path) is None
+    assert video_module.read_video(path)[0].shape == (6, 32, 32, 3)
+
+
+@needs_zscale
 def test_an_hdr_recording_says_so(tmp_path):
     """predict reads an HLG drop as SDR and says so (prediction.json's input.dynamic_range, a
     printed line); an SDR clip of the same frames says nothing."""
@@ -192,6 +207,7 @@ def test_without_zscale_an_hdr_video_is_refused_in_one_line(tmp_path, monkeypatc
         video_module.read_video(path)
 
 
+@needs_zscale
 def test_an_upright_hdr_phone_video_reads_upright(tmp_path):
     """An iPhone filming upright in HDR: HLG frames stored sideways with a display rotation read
     as shown, in their SDR colours (the rotation is applied before the HDR conversion)."""

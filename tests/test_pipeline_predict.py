@@ -243,6 +243,8 @@ def test_a_dataset_sample_takes_masks_and_refuses_recording_options(dataset, sam
     for option in ({"camera": "c.json"}, {"fps": 30.0}, {"fov_deg": 50.0}, {"background": "b"}):
         with pytest.raises(InputError, match="is for recordings, not dataset samples"):
             load_input(dataset, sample=sample_id, **option)
+    with pytest.raises(InputError, match="--camera, --fps are for recordings"):  # all, at once
+        load_input(dataset, sample=sample_id, camera="c.json", fps=30.0)
     result, out = _predict([dataset, "--sample", sample_id, "--camera", "c.json"], tmp_path)
     assert result.exit_code != 0 and "--camera is for recordings" in result.output
     assert not out.exists()

@@ -234,7 +234,7 @@ def load_observation(
         raw, recorded_fps, times, recorded_size, stamps = read_video(
             path, None if fps and slowed is None else until, side
         )
-        hdr = hdr_transfer(path)  # read as SDR by read_video (video.hdr_to_sdr)
+        hdr = hdr_transfer(path)  # read as SDR by read_video (video.hdr_to_sdr_filter)
     else:
         raise InputError(
             f"expected a video ({', '.join(VIDEO_SUFFIXES)}) or a folder of frames",

@@ -83,108 +83,87 @@ def _read_gif(path: Path) -> tuple[list[np.ndarray], np.ndarray]:
 VARIABLE_RATE_SHARE = 0.25
 
 
-# What ffmpeg lists of a file without decoding it: its global tags, its video packets (on
-# stdout), its streams as ffmpeg describes them (on stderr, at the info level)
+# What ffmpeg lists of a file without decoding it: its global tags; its video packets (stdout),
+# run at the info level so that its stderr also describes the streams (hdr_transfer)
 _LISTINGS = {
     "ffmetadata": ["-v", "error", "-i", "{}", "-f", "ffmetadata", "-"],
-    "framecrc": ["-v", "error", "-i", "{}", "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"],
-    "streams": ["-v", "info", "-i", "{}", "-map", "0:v:0", "-frames:v", "0", "-f", "null", "-"],
+    "framecrc": ["-v", "info", "-i", "{}", "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"],
 }
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_listing(kind: str, path: str, version: tuple[int, int]) -> str | None:
+def _cached_listing(kind: str, path: str, version: tuple[int, int]) -> tuple[str, str] | None:
     run = run_ffmpeg([path if a == "{}" else a for a in _LISTINGS[kind]], timeout=60)
-    if run.returncode != 0:
-        return None
-    return run.stderr if kind == "streams" else run.stdout
+    return (run.stdout, run.stderr) if run.returncode == 0 else None
 
 
-def _listing(kind: str, path: str | os.PathLike) -> str | None:
-    """ffmpeg's ``kind`` listing of a file (:data:`_LISTINGS`), or None when it fails: read once
-    per version of the file (predict asks for the tags and the packets more than once)."""
+def _listing(kind: str, path: str | os.PathLike, stream: str = "stdout") -> str | None:
+    """ffmpeg's ``kind`` listing of a file (:data:`_LISTINGS`; its ``stream``, stdout or
+    stderr), or None when it fails: read once per version of the file (predict asks for the tags
+    and the packets more than once)."""
     stat = os.stat(path)
-    return _cached_listing(kind, str(path), (stat.st_mtime_ns, stat.st_size))
+    run = _cached_listing(kind, str(path), (stat.st_mtime_ns, stat.st_size))
+    return None if run is None else run[0 if stream == "stdout" else 1]
 
 
 # A phone's HDR video (10-bit HEVC: an iPhone's default since 2020 is HLG, others write PQ) holds
 # display light up to ~1000 cd/m². Read as it is stored — the SDR curve and primaries assumed —
 # it is dim, grey and desaturated (docs/usage.md#an-hdr-phone-video). It is read as the SDR frames
-# every model learnt from instead (:func:`hdr_to_sdr`): ITU-R BT.2408's SDR white (203 cd/m²)
-# made white, BT.2020's primaries turned into BT.709's in linear light, the sRGB curve;
-# highlights brighter than that white clip. HLG's light is that of BT.2100's 1000 cd/m² reference
-# display: its OOTF (system gamma 1.2) scales each pixel by its luminance (zimg, ffmpeg's zscale,
-# raises each channel to the gamma instead, which over-saturates colours: not used).
+# every model learnt from instead, by ffmpeg's zscale (zimg; imageio-ffmpeg's binary has it):
+# ITU-R BT.2408's SDR white (203 cd/m²) made white, the stream's primaries (BT.2020) turned into
+# BT.709's in linear light, the sRGB curve of the training renders (not BT.1886's inverse: ~6
+# levels brighter mid-tones); each channel clipped to [0, 1], so highlights above white and
+# colours outside BT.709 clip. HLG is the light of BT.2100's reference display, its OOTF
+# (gamma 1.2) by the luminance: ``agamma=0`` (zscale's default raises each channel to the gamma,
+# up to ~60 levels too saturated).
 SDR_WHITE_NITS = 203.0
 HDR_TRANSFERS = {"arib-std-b67": "HLG", "smpte2084": "PQ"}  # ffmpeg's names → the curve's
-HLG_PEAK_NITS, HLG_GAMMA = 1000.0, 1.2
-BT709_TO_BT2020 = np.array(  # linear RGB, ITU-R BT.2087
-    [[0.6274, 0.3293, 0.0433], [0.0691, 0.9195, 0.0114], [0.0164, 0.0880, 0.8956]]
-)
-LUMA_BT2020 = np.array([0.2627, 0.6780, 0.0593])
+HDR_DEFAULT_TAGS = {"min": "bt2020nc", "pin": "bt2020"}  # where the stream leaves them unknown
+
+
+def hdr_to_sdr_filter(curve: str, unknown: tuple[str, ...] = ()) -> str:
+    """ffmpeg's filter that turns an HDR ``curve``'s ("HLG", "PQ") frames into SDR (module note),
+    with BT.2020's matrix and primaries assumed for the ``unknown`` ones ("min", "pin")."""
+    given = "".join(f":{key}={HDR_DEFAULT_TAGS[key]}" for key in unknown)
+    ootf = ":agamma=0" if curve == "HLG" else ""
+    return (
+        f"zscale=t=linear:npl={SDR_WHITE_NITS:g}:p=bt709{ootf}{given},format=gbrpf32le,"
+        "zscale=t=iec61966-2-1:r=full,format=gbrp"
+    )
 
 
 @functools.cache
-def _signal_to_light(curve: str) -> np.ndarray:
-    """[65536] float32: a 16-bit full-range HDR signal → PQ: display light in SDR whites; HLG:
-    scene light in [0, 1] (ITU-R BT.2100's inverse EOTF / inverse OETF)."""
-    x = np.arange(65536, dtype=np.float64) / 65535.0
-    if curve == "PQ":
-        m1, m2 = 2610 / 16384, 2523 / 4096 * 128
-        c1, c2, c3 = 3424 / 4096, 2413 / 4096 * 32, 2392 / 4096 * 32
-        p = x ** (1 / m2)
-        light = 10000.0 * (np.maximum(p - c1, 0.0) / (c2 - c3 * p)) ** (1 / m1) / SDR_WHITE_NITS
-    else:
-        a, b, c = 0.17883277, 0.28466892, 0.55991073
-        light = np.where(x <= 0.5, x * x / 3.0, (np.exp((x - c) / a) + b) / 12.0)
-    return light.astype(np.float32)
-
-
-@functools.cache
-def _linear_to_srgb() -> np.ndarray:  # [65536] uint8: linear light in 65535ths → sRGB
-    linear = np.arange(65536, dtype=np.float64) / 65535.0
-    encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
-    return np.rint(encoded * 255.0).astype(np.uint8)
-
-
-def hdr_to_sdr(signal: np.ndarray, curve: str) -> np.ndarray:
-    """[H, W, 3] uint16 R'G'B' (full range, BT.2020) of an HDR ``curve`` ("HLG", "PQ") → [H, W,
-    3] uint8 sRGB (BT.709 primaries), SDR white at :data:`SDR_WHITE_NITS` (module note)."""
-    light = _signal_to_light(curve)[signal.reshape(-1, 3)]  # [H·W, 3]: one matrix product each
-    if curve == "HLG":  # the OOTF: display light, cd/m², in SDR whites
-        luminance = light @ LUMA_BT2020.astype(np.float32)
-        gain = (HLG_PEAK_NITS / SDR_WHITE_NITS) * luminance ** np.float32(HLG_GAMMA - 1.0)
-        light *= gain[:, None]
-    linear = light @ np.linalg.inv(BT709_TO_BT2020).T.astype(np.float32)
-    np.clip(linear, 0.0, 1.0, out=linear)
-    index = (linear * 65535.0 + 0.5).astype(np.uint16).reshape(signal.shape)
-    return _linear_to_srgb()[index]
-
-
-# An HDR video's Y'CbCr → its R'G'B' signal, 16-bit full range: BT.2100's matrix (BT.2020 non-
-# constant luminance), the stream's range. zimg (ffmpeg's zscale), exactly: swscale's 16-bit RGB
-# tops out at 65283, not 65535 (a 0.4 % darker signal: ~2 levels of SDR white after PQ)
-HDR_SIGNAL_FILTER = "zscale=min=bt2020nc:r=full,format=gbrp16le"
-
-
-@functools.cache
-def _has_zscale() -> bool:  # whether this ffmpeg has the zscale filter (HDR_SIGNAL_FILTER)
+def _has_zscale() -> bool:  # whether this ffmpeg has the zscale filter (hdr_to_sdr_filter)
     run = run_ffmpeg(["-v", "error", "-filters"], timeout=60)
     return run.returncode == 0 and re.search(r"^\s*\S+\s+zscale\s", run.stdout, re.M) is not None
 
 
-def hdr_transfer(path: str | os.PathLike) -> str | None:
-    """The HDR transfer curve a video file's (first) video stream is tagged with, "HLG" or "PQ";
-    None for SDR, an untagged stream, a file ffmpeg cannot read, a GIF."""
+def _video_stream_line(path: str | os.PathLike) -> str | None:
+    """ffmpeg's description of a video file's first video stream (one line), or None."""
     if Path(path).suffix.lower() not in VIDEO_SUFFIXES or Path(path).suffix.lower() == ".gif":
         return None
-    text = _listing("streams", path)
-    inputs = "" if text is None else text.split("Output #")[0]  # the file's, not the output's
-    stream = re.search(r"Stream #\d+:\d+.*?: Video: .*", inputs)
-    if stream is None:
-        return None
-    found = [curve for name, curve in HDR_TRANSFERS.items() if re.search(rf"\b{name}\b", stream[0])]
+    text = _listing("framecrc", path, "stderr")
+    inputs = "" if text is None else text.split("\nOutput #")[0]  # the file's, not the output's
+    found = re.search(r"Stream #\d+:\d+.*?: Video: .*", inputs)
+    return None if found is None else found[0]
+
+
+def hdr_transfer(path: str | os.PathLike) -> str | None:
+    """The HDR transfer curve a video file's (first) video stream is tagged with, "HLG" or "PQ";
+    None for SDR, an untagged stream, a file ffmpeg cannot list, a GIF."""
+    line = _video_stream_line(path) or ""
+    found = [curve for name, curve in HDR_TRANSFERS.items() if re.search(rf"\b{name}\b", line)]
     return found[0] if found else None
+
+
+def _unknown_colour_tags(line: str) -> tuple[str, ...]:
+    """Which of the matrix and primaries ("min", "pin") a stream's description leaves unknown:
+    ffmpeg writes them as "(range, matrix/primaries/transfer)", the range left out if unknown."""
+    tags = re.search(r"\((?:(?:tv|pc|unknown), )?([\w-]+)/([\w-]+)/([\w-]+)", line)
+    if tags is None:  # the transfer alone was named
+        return ("min", "pin")
+    matrix, primaries = tags.groups()[:2]
+    return tuple(key for key, value in (("min", matrix), ("pin", primaries)) if value == "unknown")
 
 
 def packet_times(path: str | os.PathLike) -> np.ndarray | None:
@@ -233,9 +212,10 @@ def read_video(
     ``max_side``: each frame area-averaged to at most that many pixels a side as it is decoded
     (:func:`fit_within`) — a long 1080p phone clip is never held in memory whole.
 
-    An HDR video (HLG or PQ: :func:`hdr_transfer`) is read as SDR (:func:`hdr_to_sdr`). GIF
-    keeps its alpha channel when it has transparency. Raises InputError (one line naming the
-    file) for a missing or unreadable file and for a video without frames.
+    An HDR video (HLG or PQ: :func:`hdr_transfer`) is read as SDR (:func:`hdr_to_sdr_filter`).
+    GIF keeps its alpha channel when it has transparency. Raises InputError (one line naming the
+    file) for a missing or unreadable file, a video without frames, and an HDR video where this
+    ffmpeg has no zscale filter.
     """
     import imageio.v2 as imageio
 
@@ -248,16 +228,11 @@ def read_video(
     # frames made smaller in RESIZE_THREADS threads as the next ones are decoded (PIL's resize
     # lets go of the GIL): the same pixels, ~1.3× sooner from a phone's 1080p (docs/benchmarks.md)
     shrink = None if max_side is None else ThreadPoolExecutor(RESIZE_THREADS)
-    hdr = None  # an HDR video's curve (hdr_transfer): its frames are made SDR as they are kept
 
     def keep(frame: np.ndarray) -> None:
-        # an HDR video's frames: [H, W, 3] uint16 R'G'B', made SDR with the resizing
-        frame = _as_rgb_or_rgba(frame, source) if hdr is None else np.asarray(frame)
+        frame = _as_rgb_or_rgba(frame, source)
         sizes.add((frame.shape[1], frame.shape[0]))
-        if shrink is None:
-            frames.append(frame if hdr is None else hdr_to_sdr(frame, hdr))
-        else:
-            frames.append(shrink.submit(_fit_one, frame, max_side, hdr))
+        frames.append(frame if shrink is None else shrink.submit(_fit_one, frame, max_side))
         if shrink is not None and len(frames) > 2 * RESIZE_THREADS:  # at most that many waiting
             frames[-2 * RESIZE_THREADS - 1] = frames[-2 * RESIZE_THREADS - 1].result()
 
@@ -274,7 +249,7 @@ def read_video(
                 stamps = stamps - stamps[0]
                 output += ["-fps_mode", "passthrough"]
             hdr = hdr_transfer(path)
-            if hdr is not None:  # its 16-bit R'G'B' (BT.2020), read as SDR by hdr_to_sdr
+            if hdr is not None:  # read as SDR (hdr_to_sdr_filter)
                 if not _has_zscale():
                     raise InputError(
                         f"an HDR video ({hdr}): reading it needs ffmpeg's zscale filter, which "
@@ -282,10 +257,9 @@ def read_video(
                         "IMAGEIO_FFMPEG_EXE), or export the clip as SDR",
                         source=source,
                     )
-                output += ["-vf", HDR_SIGNAL_FILTER]
+                unknown = _unknown_colour_tags(_video_stream_line(path) or "")
+                output += ["-vf", hdr_to_sdr_filter(hdr, unknown)]
             options = {"output_params": output} if output else {}
-            if hdr is not None:
-                options["dtype"] = "uint16"
             with imageio.get_reader(path, format="FFMPEG", **options) as reader:
                 fps = reader.get_meta_data().get("fps")
                 last = None
@@ -413,9 +387,8 @@ def working_size(width: int, height: int, max_side: int = WORK_MAX_SIDE) -> tupl
     return max(1, round(width * scale)), max(1, round(height * scale))
 
 
-def _fit_one(image: np.ndarray, max_side: int, hdr: str | None = None) -> np.ndarray:
-    """[H, W, C] → fit_within's; an HDR ``hdr`` curve's [H, W, 3] uint16 made SDR first."""
-    return fit_within((image if hdr is None else hdr_to_sdr(image, hdr))[None], max_side)[0]
+def _fit_one(image: np.ndarray, max_side: int) -> np.ndarray:  # [H, W, C] → fit_within's
+    return fit_within(image[None], max_side)[0]
 
 
 def fit_within(images: np.ndarray, max_side: int = WORK_MAX_SIDE) -> np.ndarray:

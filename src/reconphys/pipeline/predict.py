@@ -345,7 +345,8 @@ def predict(
     if observation.hdr is not None:  # an HDR phone video, read as SDR (capture/video.py)
         details["input"]["dynamic_range"] = (
             f"HDR ({observation.hdr}) read as SDR: {SDR_WHITE_NITS:g} cd/m² made white, BT.2020 "
-            "turned into BT.709, the sRGB curve, brighter highlights clipped"
+            "turned into BT.709, the sRGB curve; brighter highlights and colours outside BT.709 "
+            "clipped"
         )
 
     return predict_observation(

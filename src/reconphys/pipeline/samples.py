@@ -59,13 +59,13 @@ def load_sample(
     index = dataset.index_of(sample)
     item = dataset[index]
     frames = item["frames"][0].float()
-    folder, masks, mask_source, rating = masks, None, None, None
+    found, mask_source, rating = None, None, None  # found: [T, H, W] masks (None: the backdrop)
     fit_px = FALL_FIT_PX
-    if folder is not None:  # a segmentation tool's masks, as for a recording
-        masks = read_mask_folder(folder, *frames.shape[:3])
-        mask_source = f"mask folder {folder}"
+    if masks is not None:  # a segmentation tool's masks, as for a recording
+        found = read_mask_folder(masks, *frames.shape[:3])
+        mask_source = f"mask folder {masks}"
     elif dataset.settings.scene == "realistic":  # as a recording: no stored mask is used
-        masks, rating = segment_frames(frames)
+        found, rating = segment_frames(frames)
         mask_source = "mask segmenter and the clip's own colours (realistic scene)"
         fit_px = SEGMENTER_FALL_FIT_PX
     observation = stored_observation(
@@ -74,7 +74,7 @@ def load_sample(
         item["world_to_cam"][0],
         dataset.settings.frame_dt,
         f"{root} sample {sample} view {view} (stored frames)",
-        masks=masks,
+        masks=found,
         mask_source=mask_source,
         fall_fit_px=fit_px,
         mask_rating=rating,
@@ -106,9 +106,9 @@ def load_input(
     min_frames: int = 0,  # a recording with fewer (after resampling) is refused at once
 ) -> tuple[Observation, SampleTruth | None]:
     """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
-    and the sample's truth for a dataset input (None otherwise). Raises InputError, also for a
-    recording's option given with a dataset sample (its camera and frame rate are stored): an
-    option that would be ignored is refused, not dropped in silence."""
+    and the sample's truth for a dataset input (None otherwise). Raises InputError, also for
+    ``background``, ``camera``, ``fps``, ``fov_deg``, ``start`` or ``end`` given with a dataset
+    sample (its camera and frame rate are stored): refused, not dropped in silence."""
     path = Path(input)
     if not path.exists():
         raise InputError("not found", source=str(path))
@@ -120,10 +120,11 @@ def load_input(
             "--fps": fps is not None,
             "--fov": fov_deg is not None,
         }
-        for option in (name for name, used in given.items() if used):
+        named = [name for name, used in given.items() if used]
+        if named:
             raise InputError(
-                f"{option} is for recordings, not dataset samples (a sample's camera and frame "
-                "rate are stored with it)",
+                f"{', '.join(named)} {'is' if len(named) == 1 else 'are'} for recordings, not "
+                "dataset samples (a sample's camera and frame rate are stored with it)",
                 source=str(path),
             )
         return load_sample(path, sample, view, masks)

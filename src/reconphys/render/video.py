@@ -57,13 +57,16 @@ def write_mp4(
 
 def run_ffmpeg(arguments: list[str], timeout: float = 120.0):
     """imageio-ffmpeg's ffmpeg binary with ``arguments``, its output captured as text →
-    ``subprocess.CompletedProcess``."""
+    ``subprocess.CompletedProcess`` (bytes that are not UTF-8 — a tag or a file name in another
+    encoding — replaced, not raised on)."""
     import subprocess
 
     import imageio_ffmpeg
 
     command = [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", *arguments]
-    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        command, capture_output=True, text=True, errors="replace", timeout=timeout
+    )
 
 
 def copy_with_metadata(
