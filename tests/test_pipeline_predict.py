@@ -240,13 +240,22 @@ def test_a_dataset_sample_takes_masks_and_refuses_recording_options(dataset, sam
     (folder / "000.png").unlink()  # one mask short: refused, naming the folder
     with pytest.raises(InputError, match="mask images for"):
         load_input(dataset, sample=sample_id, masks=folder)
-    for option in ({"camera": "c.json"}, {"fps": 30.0}, {"fov_deg": 50.0}, {"background": "b"}):
+    for option in (
+        *({"camera": "c.json"}, {"fps": 30.0}, {"fov_deg": 50.0}, {"background": "b"}),
+        {"touch": "rigid"},
+    ):
         with pytest.raises(InputError, match="is for recordings, not dataset samples"):
             load_input(dataset, sample=sample_id, **option)
     with pytest.raises(InputError, match="--camera, --fps are for recordings"):  # all, at once
         load_input(dataset, sample=sample_id, camera="c.json", fps=30.0)
     result, out = _predict([dataset, "--sample", sample_id, "--camera", "c.json"], tmp_path)
     assert result.exit_code != 0 and "--camera is for recordings" in result.output
+    assert not out.exists()
+
+
+def test_a_recording_refuses_a_dataset_samples_view(bundle, tmp_path):
+    result, out = _predict([bundle / "video.mp4", "--view", "1"], tmp_path)
+    assert result.exit_code != 0 and "--view is for dataset samples" in result.output
     assert not out.exists()
 
 

@@ -111,7 +111,7 @@ def _listing(kind: str, path: str | os.PathLike, stream: str = "stdout") -> str 
 # it is dim, grey and desaturated (docs/usage.md#an-hdr-phone-video). It is read as the SDR frames
 # every model learnt from instead, by ffmpeg's zscale (zimg; imageio-ffmpeg's binary has it):
 # ITU-R BT.2408's SDR white (203 cd/m²) made white, the stream's primaries (BT.2020) turned into
-# BT.709's in linear light, the sRGB curve of the training renders (not BT.1886's inverse: ~6
+# BT.709's in linear light, the sRGB curve of the training renders (not BT.1886's inverse: 7–10
 # levels brighter mid-tones); each channel clipped to [0, 1], so highlights above white and
 # colours outside BT.709 clip. HLG is the light of BT.2100's reference display, its OOTF
 # (gamma 1.2) by the luminance: ``agamma=0`` (zscale's default raises each channel to the gamma,

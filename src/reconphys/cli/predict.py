@@ -58,10 +58,10 @@ def predict_command(
         "lens from the video's metadata, else 45° across the shorter side).",
     ),
     touch: str = typer.Option(
-        "soft",
-        help="How the object meets the ground, for the camera read from the video: 'soft' (it "
-        "squashes as it lands) or 'rigid' (it stops or bounces at once: a hard toy, a block). "
-        "'soft' reads a rigid object's ground ~7 cm high.",
+        None,
+        help="How the object meets the ground, for the camera read from the video: 'soft' (the "
+        "default: it squashes as it lands) or 'rigid' (it stops or bounces at once: a hard toy, "
+        "a block). 'soft' reads a rigid object's ground ~7 cm high.",
     ),
     fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
     start: str = typer.Option(

@@ -57,7 +57,7 @@ from ..models.reconstruct import (
     predicted_gaussians,
 )
 from ..physics import ATTRIBUTES
-from .samples import SampleTruth, load_input
+from .samples import SampleTruth, is_dataset, load_input
 from .search import (
     OBSERVABLES,
     Z_10_90,
@@ -245,7 +245,8 @@ def predict(
     background: str | os.PathLike | None = None,
     camera: str | os.PathLike | None = None,
     fov: float | None = None,
-    touch: str = "soft",  # how the object meets the ground, for the camera read from the video
+    touch: str | None = None,  # how the object meets the ground, for the camera read from the
+    # video: "soft" (None) or "rigid"
     fps: float | None = None,
     start: float | str = 0.0,  # seconds into a recording, or "auto" (read from the masks)
     end: float | None = None,
@@ -277,7 +278,9 @@ def predict(
         raise InputError(
             f"expected one of {', '.join(PLACEMENTS)}, got {placement!r}", field="--placement"
         )
-    check_touch(touch)
+    check_touch(touch or "soft")
+    if view is not None and not is_dataset(input):
+        raise InputError("--view is for dataset samples (a recording has one view)", field="--view")
     if ground not in GROUNDS:
         raise InputError(f"expected camera or landed, got {ground!r}", field="--ground")
     if refine_steps < 0:

@@ -98,7 +98,8 @@ def load_input(
     fps: float | None = None,
     frame_dt: float = 0.03,
     fov_deg: float | None = None,  # vertical field of view when the camera is estimated
-    touch: str = "soft",  # how the object meets the ground, when the camera is estimated
+    touch: str | None = None,  # how the object meets the ground, when the camera is estimated
+    # (calibrate.TOUCHES; None: "soft")
     sample: str | None = None,  # dataset input: the sample id
     view: int = 0,  # dataset input: the view
     start: float | str = 0.0,  # seconds into a recording: its release (frame 0), or "auto"
@@ -107,8 +108,8 @@ def load_input(
 ) -> tuple[Observation, SampleTruth | None]:
     """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
     and the sample's truth for a dataset input (None otherwise). Raises InputError, also for
-    ``background``, ``camera``, ``fps``, ``fov_deg``, ``start`` or ``end`` given with a dataset
-    sample (its camera and frame rate are stored): refused, not dropped in silence."""
+    ``background``, ``camera``, ``fps``, ``fov_deg``, ``touch``, ``start`` or ``end`` given
+    with a dataset sample (its camera and frame rate are stored): refused, not dropped."""
     path = Path(input)
     if not path.exists():
         raise InputError("not found", source=str(path))
@@ -119,6 +120,7 @@ def load_input(
             "--camera": camera is not None,
             "--fps": fps is not None,
             "--fov": fov_deg is not None,
+            "--touch": touch is not None,
         }
         named = [name for name, used in given.items() if used]
         if named:
@@ -138,7 +140,7 @@ def load_input(
         fps=fps,
         frame_dt=frame_dt,
         fov_deg=fov_deg,
-        touch=touch,
+        touch=touch or "soft",
         start=start,
         end=end,
         segment=segment_frames,
