@@ -138,9 +138,14 @@ def _has_zscale() -> bool:  # whether this ffmpeg has the zscale filter (hdr_to_
     return run.returncode == 0 and re.search(r"^\s*\S+\s+zscale\s", run.stdout, re.M) is not None
 
 
+def _ffmpeg_video(path: str | os.PathLike) -> bool:  # a video file ffmpeg reads (GIF: pillow)
+    suffix = Path(path).suffix.lower()
+    return suffix in VIDEO_SUFFIXES and suffix != ".gif"
+
+
 def _video_stream_line(path: str | os.PathLike) -> str | None:
     """ffmpeg's description of a video file's first video stream (one line), or None."""
-    if Path(path).suffix.lower() not in VIDEO_SUFFIXES or Path(path).suffix.lower() == ".gif":
+    if not _ffmpeg_video(path):
         return None
     text = _listing("framecrc", path, "stderr")
     inputs = "" if text is None else text.split("\nOutput #")[0]  # the file's, not the output's
@@ -325,7 +330,7 @@ def _ffmetadata_value(text: str, key: str) -> str | None:
 def _video_tag(path: Path, keys: tuple[str, ...]) -> float | None:
     """The first of ``keys`` in a video file's global metadata (ffmpeg's ffmetadata), as a
     positive number, or None (absent, not a number, or a file ffmpeg cannot read)."""
-    if path.suffix.lower() not in VIDEO_SUFFIXES or path.suffix.lower() == ".gif":
+    if not _ffmpeg_video(path):
         return None
     try:
         values = (_ffmetadata_value(_listing("ffmetadata", path), key) for key in keys)
