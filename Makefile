@@ -197,10 +197,27 @@ masks-model: install
 	    --data data/seg_engine_149 --exclude configs/masks_held_out.txt \
 	    --init runs/masks_hand_grey --lr 0.0005 --steps 1000 --out runs/masks_hand_grey_engine \
 	    --no-progress
-	cp runs/masks_hand_grey_engine/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
-	cp runs/masks_hand_grey_engine/model.json src/reconphys/weights/mask_segmenter.json
-	cp runs/masks_2_hand_grey/model.safetensors src/reconphys/weights/mask_segmenter_2.safetensors
-	cp runs/masks_2_hand_grey/model.json src/reconphys/weights/mask_segmenter_2.json
+	# then both go on with a third renderer's look (docs/usage.md "A third renderer in training",
+	# 2026-12-03, seventh session): 200 drops of wheel meshes path-traced by Mitsuba (half lit by
+	# a sky), 1,000 steps each; the second member without pybullet's renders (about 40 min for
+	# the renders, 17 for the training, one thread each)
+	$(BIN)/python -m pip install -q mitsuba
+	$(BIN)/python benchmarks/other_engine.py render data/seg_mitsuba_151 --clips 200 \
+	    --training-meshes 200 --seed 151 --renderer mitsuba --spp 16 --size 96x96 \
+	    --sky-share 0.5 --textures checker_blue.png,checker_grid.jpg,tex256.png
+	$(BIN)/reconphys train-masks --data data/seg_pyb30 --data data/seg_grey_pyb \
+	    --data data/seg_grey_proc --data data/seg_hand_vivid --data data/seg_engine_139 \
+	    --data data/seg_engine_149 --data data/seg_mitsuba_151 \
+	    --exclude configs/masks_held_out.txt --init runs/masks_hand_grey_engine --lr 0.0005 \
+	    --steps 1000 --out runs/masks_hand_grey_engine_mitsuba --threads 1 --no-progress
+	$(BIN)/reconphys train-masks --data data/seg_pyb30 --data data/seg_grey_pyb \
+	    --data data/seg_grey_proc --data data/seg_hand_vivid --data data/seg_mitsuba_151 \
+	    --exclude configs/masks_held_out.txt --init runs/masks_2_hand_grey --lr 0.0005 \
+	    --steps 1000 --out runs/masks_2_hand_grey_mitsuba --threads 1 --no-progress
+	cp runs/masks_hand_grey_engine_mitsuba/model.safetensors src/reconphys/weights/mask_segmenter.safetensors
+	cp runs/masks_hand_grey_engine_mitsuba/model.json src/reconphys/weights/mask_segmenter.json
+	cp runs/masks_2_hand_grey_mitsuba/model.safetensors src/reconphys/weights/mask_segmenter_2.safetensors
+	cp runs/masks_2_hand_grey_mitsuba/model.json src/reconphys/weights/mask_segmenter_2.json
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache .ruff_cache

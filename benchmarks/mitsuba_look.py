@@ -58,11 +58,14 @@ def _sensor(world_to_cam: np.ndarray, fov: float, width: int, height: int, spp: 
     }
 
 
-def draw_look(rng: np.random.Generator, textures: tuple[str, ...]) -> dict:
+def draw_look(rng: np.random.Generator, textures: tuple[str, ...], sky_share: float = 0.0) -> dict:
     """The scene's random choices (JSON-ready): floor image, tiling and tint, wall colour or
-    image, object colour and gloss, lamp direction, size and strength, ambient light."""
+    image, object colour and gloss, lamp direction, size and strength, ambient light.
+    ``sky_share``: the share of clips lit by a sky (:func:`_sky`) instead of the constant
+    ambient light, half of them without the wall, so the sky is seen over the floor's horizon
+    (0: the draws of the validation and test renders, made before the sky existed)."""
     direction = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(0.7, 3.0)])
-    return {
+    look = {
         "floor": str(textures[rng.integers(len(textures))]),
         "floor_tiles": float(rng.uniform(4.0, 40.0)),  # image repeats over the 20-m floor
         "white_balance": rng.uniform(0.75, 1.0, 3).tolist(),  # the camera's, on every pixel
@@ -76,6 +79,35 @@ def draw_look(rng: np.random.Generator, textures: tuple[str, ...]) -> dict:
         "lamp_irradiance": float(rng.uniform(1.0, 4.0)),
         "ambient": float(rng.uniform(0.1, 0.6)),
         "exposure_percentile": float(rng.uniform(97.0, 99.9)),
+        "sky": None,
+    }
+    if sky_share > 0 and rng.random() < sky_share:
+        look["sky"] = {
+            "zenith": rng.uniform(0.1, 1.0, 3).tolist(),
+            "horizon": rng.uniform(0.4, 1.0, 3).tolist(),
+            "strength": float(rng.uniform(0.3, 1.2)),
+        }
+        if rng.random() < 0.5:
+            look["wall"], look["no_wall"] = None, True
+    return look
+
+
+def _sky(sky: dict):
+    """A sky as Mitsuba's environment light: a latitude-longitude image from the zenith's
+    colour to the horizon's (smoothstep in elevation), a dim floor-coloured grey below it;
+    Mitsuba's y (up) turned onto the world's z."""
+    mi = _variant()
+    rows, cols = 64, 128
+    elevation = np.linspace(0.5, -0.5, rows) * math.pi  # row 0 straight up
+    up = np.clip(elevation / (0.5 * math.pi), 0.0, 1.0)[:, None]
+    t = up * up * (3 - 2 * up)
+    colour = (1 - t) * np.asarray(sky["horizon"]) + t * np.asarray(sky["zenith"])  # [rows, 3]
+    colour = np.where((elevation < 0)[:, None], 0.3 * np.asarray(sky["horizon"]), colour)
+    image = np.repeat(colour[:, None, :], cols, axis=1) * sky["strength"]
+    return {
+        "type": "envmap",
+        "bitmap": mi.Bitmap(image.astype(np.float32)),
+        "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], 90.0),
     }
 
 
@@ -101,10 +133,14 @@ def _scene(look: dict, data: Path, wall_at: np.ndarray, azimuth: float, object_p
     radius = look["lamp_radius_m"]
     # a sphere of radiance L seen from d away gives the irradiance π·L·(r/d)² facing it
     radiance = look["lamp_irradiance"] * lamp_distance**2 / (math.pi * radius**2)
+    if look.get("sky"):
+        ambient = _sky(look["sky"])
+    else:
+        ambient = {"type": "constant", "radiance": {"type": "rgb", "value": look["ambient"]}}
     scene = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": MAX_DEPTH},
-        "ambient": {"type": "constant", "radiance": {"type": "rgb", "value": look["ambient"]}},
+        "ambient": ambient,
         "lamp": {
             "type": "sphere",
             "center": lamp_at,
@@ -116,7 +152,9 @@ def _scene(look: dict, data: Path, wall_at: np.ndarray, azimuth: float, object_p
             "to_world": T().scale([10.0, 10.0, 1.0]),
             "bsdf": _textured(look["floor"], look["wall_colour"], look["floor_tiles"], data),
         },
-        "wall": {
+    }
+    if not look.get("no_wall"):
+        scene["wall"] = {
             "type": "rectangle",
             # facing the camera (its normal along the wall's offset back towards the drop)
             "to_world": T()
@@ -128,8 +166,7 @@ def _scene(look: dict, data: Path, wall_at: np.ndarray, azimuth: float, object_p
                 "type": "twosided",
                 "bsdf": _textured(look["wall"], look["wall_colour"], 3.0, data),
             },
-        },
-    }
+        }
     if object_ply is not None:
         scene["object"] = {"type": "ply", "filename": str(object_ply), "bsdf": _object_bsdf(look)}
     return scene

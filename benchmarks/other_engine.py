@@ -138,6 +138,7 @@ def _render_clip(
     renderer: str = "tiny",
     spp: int = 32,  # Mitsuba's samples a pixel
     draw_only: bool = False,  # Mitsuba's random choices drawn, its frames not rendered
+    sky_share: float = 0.0,  # Mitsuba's clips lit by a sky (mitsuba_look.draw_look)
 ) -> dict | None:
     """One drop; None when the object leaves the frame or touches its border (drawn again).
     ``soft``: the mesh as pybullet's mass-spring deformable body (a spring on every edge and
@@ -332,7 +333,7 @@ def _render_clip(
         import mitsuba_look
 
         look = {"floor": None, "wall": None, "object": None}
-        drawn = mitsuba_look.draw_look(rng, textures)
+        drawn = mitsuba_look.draw_look(rng, textures, sky_share)
         faces = np.asarray(loaded.faces)
         args = (world_to_cam, fov, width, height)
         if not draw_only:
@@ -395,6 +396,8 @@ def render(args) -> None:
     textures = tuple(args.textures.split(",")) if args.textures else TEXTURES
     if not set(textures) <= set(TEXTURES):
         raise SystemExit(f"--textures: each one of {', '.join(TEXTURES)}")
+    if args.sky_share and args.renderer != "mitsuba":
+        raise SystemExit("--sky-share: Mitsuba's renders only")
     if args.soft and args.renderer != "tiny":
         raise SystemExit("--soft: pybullet's TinyRenderer only")
     if args.soft:
@@ -417,7 +420,17 @@ def render(args) -> None:
             done = (folder / "truth.json").is_file()
             try:
                 clip = _render_clip(
-                    p, rng, mesh, width, height, args.soft, textures, args.renderer, args.spp, done
+                    p,
+                    rng,
+                    mesh,
+                    width,
+                    height,
+                    args.soft,
+                    textures,
+                    args.renderer,
+                    args.spp,
+                    done,
+                    args.sky_share,
                 )
             except Exception as e:  # a broken mesh of the wheel's (random_urdfs/168 is one)
                 if not args.training_meshes:
@@ -729,6 +742,13 @@ def main() -> None:
         "drops; benchmarks/mitsuba_look.py)",
     )
     make.add_argument("--spp", type=int, default=32, help="Mitsuba's samples a pixel")
+    make.add_argument(
+        "--sky-share",
+        type=float,
+        default=0.0,
+        help="Mitsuba's clips lit by a sky instead of a constant ambient light, half of them "
+        "without the wall (training variety; 0 keeps the validation and test renders' draws)",
+    )
     read = commands.add_parser("measure", help="read the clips as predict does")
     read.add_argument("out")
     read.add_argument("--limit", type=int, default=None)
