@@ -94,7 +94,7 @@ def draw_look(rng: np.random.Generator, textures: tuple[str, ...], sky_share: fl
 
 def _sky(sky: dict):
     """A sky as Mitsuba's environment light: a latitude-longitude image from the zenith's
-    colour to the horizon's (smoothstep in elevation), a dim floor-coloured grey below it;
+    colour to the horizon's (smoothstep in elevation), 0.3 of the horizon's colour below it;
     Mitsuba's y (up) turned onto the world's z."""
     mi = _variant()
     rows, cols = 64, 128

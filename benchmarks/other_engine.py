@@ -429,8 +429,8 @@ def render(args) -> None:
                     textures,
                     args.renderer,
                     args.spp,
-                    done,
-                    args.sky_share,
+                    draw_only=done,
+                    sky_share=args.sky_share,
                 )
             except Exception as e:  # a broken mesh of the wheel's (random_urdfs/168 is one)
                 if not args.training_meshes:
