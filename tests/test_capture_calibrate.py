@@ -4,6 +4,7 @@ ground from the first touch (or from where the ball rests); too short a fall is 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -221,6 +222,46 @@ def test_a_clip_that_ends_before_the_touch_reads_the_ground_from_the_rest():
     assert estimate.contact_s is None and "rests" in estimate.to_json()["ground_from"]
     bottom = _frame0_bottom_height(estimate, w2c, centres, radius)
     assert bottom == pytest.approx(drop - 0.5 * radius, abs=0.02)
+
+
+def test_a_touch_whose_ground_the_fall_passes_through_is_set_aside(monkeypatch):
+    """A touch read at frame 1 of a fall that goes on for 8 more frames (as on a tossed stick
+    whose turn the centroid takes for a touch) puts the ground above where the ball falls to:
+    the estimate sets it aside and reads the ground from the rest (as a clip without the touch
+    does, the test above), and says so; kept (the rule before), the 45-cm drop reads 4 mm."""
+    from reconphys.capture import calibrate
+
+    radius, drop = 0.1, 0.45
+    masks, w2c, centres = ball_masks(15.0, 2.0, drop, radius)
+    monkeypatch.setattr(calibrate, "contact_time", lambda *args, **kwargs: 0.03)
+    estimate = estimate_camera(masks, 0.03, fov_deg=45.0)
+    assert estimate.contact_s is None and estimate.contact_set_aside_s == 0.03
+    assert "a touch read at 0.030 s put the ground above" in estimate.to_json()["ground_from"]
+    assert estimate.fall_frames >= 8 and estimate.drop_height > 0.3
+    bottom = _frame0_bottom_height(estimate, w2c, centres, radius)
+    assert bottom == pytest.approx(drop - 0.5 * radius, abs=0.03)
+    monkeypatch.setattr(calibrate, "CLEARANCE_SLACK_PX", math.inf)  # the rule before: kept
+    kept = estimate_camera(masks, 0.03, fov_deg=45.0)
+    assert kept.contact_s == 0.03 and kept.drop_height < 0.01  # 45 cm, read as under 1 cm
+    below = dataclasses.replace(kept, drop_height=-0.2)
+    assert below.drop_height_10_90 == (0.0, 0.0)  # an interval never below the ground
+
+
+def test_a_rest_above_the_falling_object_is_refused(monkeypatch):
+    """Masks that show the ball falling for 14 frames and then resting where it started (a
+    fall and a rest that cannot both be right) give no touch, and a ground read from that rest
+    lies above the falling ball: refused, with what to give, not answered."""
+    from reconphys.capture import calibrate
+
+    radius, drop = 0.1, 0.45
+    masks = ball_masks(15.0, 2.0, drop, radius, braking_g=5.0)[0]
+    mixed = torch.cat([masks[:14], masks[:1].expand(8, -1, -1)])
+    monkeypatch.setattr(calibrate, "contact_time", lambda *args, **kwargs: None)
+    with pytest.raises(InputError, match=r"cm above the falling object.*--camera FILE"):
+        estimate_camera(mixed, 0.03, fov_deg=45.0)
+    assert estimate_camera(masks, 0.03, fov_deg=45.0).drop_height > 0.3  # its own rest: read
+    monkeypatch.setattr(calibrate, "CLEARANCE_SLACK_PX", math.inf)  # the rule before: answered
+    assert estimate_camera(mixed, 0.03, fov_deg=45.0).drop_height < 0.05  # 45 cm as 2 cm
 
 
 def test_a_wrong_focal_length_moves_the_camera_not_the_object():

@@ -214,3 +214,27 @@ def test_frames_made_smaller_beside_the_decoding_are_the_ones_made_after_it(tmp_
     assert np.array_equal(small, video_module.fit_within(whole, 50))
     first = video_module.read_video(path, 0.1, 50)[0]
     assert 3 <= len(first) < 12 and np.array_equal(first, small[: len(first)])
+
+
+def test_a_files_listing_is_read_once_until_forgotten(tmp_path, monkeypatch):
+    """ffmpeg lists a file's packets once per version of it (predict asks more than once); a
+    new version, or forget_listings (a benchmark timing a user's first call), lists it again."""
+    clip = np.zeros((4, 16, 16, 3), dtype=np.uint8)
+    path = tmp_path / "clip.mp4"
+    imageio.mimwrite(path, clip, fps=30.0, codec="libx264", macro_block_size=1)
+    calls = []
+    listed = video_module.run_ffmpeg
+
+    def counted(arguments, **kwargs):
+        calls.append(arguments)
+        return listed(arguments, **kwargs)
+
+    monkeypatch.setattr(video_module, "run_ffmpeg", counted)
+    video_module.forget_listings()
+    first = video_module.packet_times(path)
+    assert first is not None and len(first) == 4 and len(calls) == 1
+    assert np.array_equal(video_module.packet_times(path), first) and len(calls) == 1
+    video_module.forget_listings()
+    assert np.array_equal(video_module.packet_times(path), first) and len(calls) == 2
+    imageio.mimwrite(path, np.concatenate([clip, clip]), fps=30.0, codec="libx264")
+    assert len(video_module.packet_times(path)) == 8 and len(calls) == 3  # a new version

@@ -26,14 +26,17 @@ freely for a few frames before it lands.
    that ends first, a fall cut short by mask errors), or with ``ground_from_touch=False``, the
    ground is read from where the object rests: in the last frame its lowest silhouette point
    is on (a box's near bottom edge) or just above (a ball's) the ground, nearer than its centre
-   by about its half-depth (taken as the mask's half-width).
+   by about its half-depth (taken as the mask's half-width). A ground either way must lie
+   below the falling object (its lowest point at the fall's first and last frames, within
+   :data:`CLEARANCE_SLACK_PX`): a touch whose ground does not is set aside for the rest's.
 3. **The world frame** follows the dataset's conventions (z up, ground z = 0): the camera on the
    +x side looking towards −x, pitched down by θ, and the object's frame-0 centre above the origin.
 
 Errors: ``InputError`` when the fall shows in fewer than :data:`MIN_FALL_FRAMES` frames
 (:data:`SEGMENTER_MIN_FALL_FRAMES` with the mask segmenter's masks; a drop from near the ground,
 or a clip that starts after the release): then the video does not show the scale, and the user
-must give ``--camera``.
+must give ``--camera``; and when the ground read from the rest lies above the falling object
+(the fall, the touch and the rest contradict each other).
 """
 
 from __future__ import annotations
@@ -104,6 +107,10 @@ MAX_READ_SIZE_M = 3.0
 # shown is too short or its masks too noisy (a clip that starts just before the landing); the
 # validation drops of this look never went past ×2.6 (docs/usage.md, camera and ground)
 MAX_SIZE_FACTOR = 3.0
+# A ground read above the falling object's lowest point (at the fall's first or last frame) by
+# more than this many pixels (at the object's depth) contradicts the fall: a touch read then is
+# set aside for the rest, and a rest read then is refused; within it, the masks' own rim
+CLEARANCE_SLACK_PX = 1.0
 # The drop height's 10–90 % interval: the size's relative error times the height, beside this
 # floor (metres, one standard deviation) for what the scale does not carry: the touch's timing,
 # the rest rule, an object that turns. Chosen on validation drops of both looks as the smallest
@@ -129,6 +136,8 @@ class CameraEstimate:
     fall_frames: int  # frames of free fall fitted
     residual_px: float  # RMS of the fall's centroid fit, pixels
     contact_s: float | None = None  # first touch of the ground (None: ground from the rest)
+    # a touch read but set aside: its ground was above the falling object (then from the rest)
+    contact_set_aside_s: float | None = None
     touch: str = "soft"  # how the touch was modelled (TOUCHES)
     scale_spread: float = 0.0  # the size's (and distance's) error, log, one standard deviation
     drop_height: float = 0.0  # frame 0's lowest silhouette point above the ground read, metres
@@ -144,13 +153,25 @@ class CameraEstimate:
     def drop_height_10_90(self) -> tuple[float, float]:
         """The true drop height, metres: 10–90 % interval (not below the ground)."""
         half = Z_10_90 * self.drop_height_spread
-        return max(self.drop_height - half, 0.0), self.drop_height + half
+        return max(self.drop_height - half, 0.0), max(self.drop_height + half, 0.0)
 
     @property
     def size_factor_10_90(self) -> tuple[float, float]:
         """The true size (distance, speeds) over the one read: 10–90 % interval."""
         half = Z_10_90 * self.scale_spread
         return math.exp(-half), math.exp(half)
+
+    @property
+    def ground_from(self) -> str:
+        """What the ground was read from, in words (prediction.json's ``ground_from``)."""
+        if self.contact_s is not None:
+            return f"the first touch of the ground ({self.touch}), {self.contact_s:.3f} s"
+        if self.contact_set_aside_s is not None:
+            return (
+                f"where the object rests (a touch read at {self.contact_set_aside_s:.3f} s put "
+                "the ground above the falling object)"
+            )
+        return "where the object rests"
 
     def to_json(self) -> dict:
         return {
@@ -168,9 +189,7 @@ class CameraEstimate:
             "size_factor_10_90": [round(x, 3) for x in self.size_factor_10_90],
             "drop_height_m": round(self.drop_height, 4),
             "drop_height_m_10_90": [round(x, 4) for x in self.drop_height_10_90],
-            "ground_from": "where the object rests"
-            if self.contact_s is None
-            else f"the first touch of the ground ({self.touch}), {self.contact_s:.3f} s",
+            "ground_from": self.ground_from,
             "contact_s": None if self.contact_s is None else round(self.contact_s, 4),
             "touch": self.touch,
         }
@@ -582,26 +601,49 @@ def estimate_camera(
     # and a ball's by its radius: taken halfway between the two (BELOW_DEPTH_SHARE)
     lean = BELOW_DEPTH_SHARE * 0.5 * track.width[0] * math.sin(pitch)
     below = (track.bottom[0] - track.centroid[0, 1] - lean) * metres_per_px
-    contact = touch_s if ground_from_touch else None
-    if contact is not None:
-        # the ground (module doc, 2): the centre at the touch plus the object's extent below
-        # its centre (frame 0's silhouette at frame 0's depth)
-        at_contact = positions(params, np.array([contact]))[0]
-        camera_height = float(at_contact @ down) + below
-    else:
-        # the object at rest (last frame) at the depth of its landing point; its lowest
-        # silhouette point is on (a box's near bottom edge) or just above (a ball's) the ground,
-        # nearer than its centre by about its half-depth (the mask's half-width) seen at cos θ
+    start, end = positions(params, np.array([0.0, (count - 1) * frame_dt]))  # the fall's ends
+
+    def clearance(camera_height: float) -> float:
+        """Metres from the ground read to the object's lowest point, at the lower of the fall's
+        first and last frames: a falling object is above the ground over its whole fall (the
+        path is a parabola, so its lowest point over the fall is at one end)."""
+        return camera_height - max(float(start @ down), float(end @ down)) - below
+
+    def from_touch(contact: float) -> float:
+        """The camera's height above the ground (module doc, 2): the centre at the touch plus
+        the object's extent below its centre (frame 0's silhouette at frame 0's depth)."""
+        return float(positions(params, np.array([contact]))[0] @ down) + below
+
+    def from_rest() -> float:
+        """The camera's height above the ground: the object at rest (last frame) at the depth
+        of its landing point; its lowest silhouette point is on (a box's near bottom edge) or
+        just above (a ball's) the ground, nearer than its centre by about its half-depth (the
+        mask's half-width) seen at cos θ."""
         landing = positions(params, np.array([count * frame_dt]))[0]
         depth = float(landing[2])
         half_width = 0.5 * track.width[-1] * depth / fx
         near = depth - half_width * math.cos(pitch)
         bottom = np.array([(track.centroid[-1, 0] - cx) / fx, (track.bottom[-1] - cy) / fy, 1.0])
-        camera_height = float(near * bottom @ down)
+        return float(near * bottom @ down)
+
+    contact = touch_s if ground_from_touch else None
+    set_aside = None  # a touch whose ground the falling object would pass through
+    slack = CLEARANCE_SLACK_PX * metres_per_px
+    if contact is not None and not clearance(from_touch(contact)) > -slack:
+        contact, set_aside = None, contact
+    camera_height = from_touch(contact) if contact is not None else from_rest()
     if not camera_height > 0:
         raise InputError(
             f"the ground read from the video is above the camera ({camera_height:.2f} m): the "
             "fall or the rest position is not read well; give the camera with --camera FILE",
+            source="camera from the video",
+        )
+    if not clearance(camera_height) > -slack:
+        raise InputError(
+            f"the ground read from the video is {-clearance(camera_height) * 100:.0f} cm above "
+            "the falling object's lowest point (from where it "
+            f"{'rests' if set_aside is None else 'rests and where it first touches'}): the "
+            "fall, the touch or the rest is not read well; give the camera with --camera FILE",
             source="camera from the video",
         )
     world_to_cam = _world_to_cam(pitch, camera_height)
@@ -622,6 +664,7 @@ def estimate_camera(
         fall_frames=count,
         residual_px=rms,
         contact_s=contact,
+        contact_set_aside_s=set_aside,
         touch=touch,
         scale_spread=math.hypot(SCALE_ERROR_FACTOR * depth_error, SCALE_ERROR_FLOOR),
         drop_height=float(camera_height - params[:3] @ down - below),

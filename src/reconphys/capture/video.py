@@ -97,6 +97,12 @@ def _cached_listing(kind: str, path: str, version: tuple[int, int]) -> tuple[str
     return (run.stdout, run.stderr) if run.returncode == 0 else None
 
 
+def forget_listings() -> None:
+    """Forget every listing read so far: the next call on a file runs ffmpeg again, as a user's
+    first ``predict`` on it does (benchmarks time that call, not a cached one)."""
+    _cached_listing.cache_clear()
+
+
 def _listing(kind: str, path: str | os.PathLike, stream: str = "stdout") -> str | None:
     """ffmpeg's ``kind`` listing of a file (:data:`_LISTINGS`; its ``stream``, stdout or
     stderr), or None when it fails: read once per version of the file (predict asks for the tags
