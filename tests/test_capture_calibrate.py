@@ -237,6 +237,7 @@ def test_a_touch_whose_ground_the_fall_passes_through_is_set_aside(monkeypatch):
     estimate = estimate_camera(masks, 0.03, fov_deg=45.0)
     assert estimate.contact_s is None and estimate.contact_set_aside_s == 0.03
     assert "a touch read at 0.030 s put the ground above" in estimate.to_json()["ground_from"]
+    assert estimate.to_json()["contact_set_aside_s"] == 0.03
     assert estimate.fall_frames >= 8 and estimate.drop_height > 0.3
     bottom = _frame0_bottom_height(estimate, w2c, centres, radius)
     assert bottom == pytest.approx(drop - 0.5 * radius, abs=0.03)

@@ -191,6 +191,9 @@ class CameraEstimate:
             "drop_height_m_10_90": [round(x, 4) for x in self.drop_height_10_90],
             "ground_from": self.ground_from,
             "contact_s": None if self.contact_s is None else round(self.contact_s, 4),
+            "contact_set_aside_s": None
+            if self.contact_set_aside_s is None
+            else round(self.contact_set_aside_s, 4),
             "touch": self.touch,
         }
 
@@ -640,7 +643,7 @@ def estimate_camera(
         )
     if not clearance(camera_height) > -slack:
         raise InputError(
-            f"the ground read from the video is {-clearance(camera_height) * 100:.0f} cm above "
+            f"the ground read from the video is {-clearance(camera_height) * 100:.1f} cm above "
             "the falling object's lowest point (from where it "
             f"{'rests' if set_aside is None else 'rests and where it first touches'}): the "
             "fall, the touch or the rest is not read well; give the camera with --camera FILE",
