@@ -27,7 +27,7 @@ freely for a few frames before it lands.
    ground is read from where the object rests: in the last frame its lowest silhouette point
    is on (a box's near bottom edge) or just above (a ball's) the ground, nearer than its centre
    by about its half-depth (taken as the mask's half-width). A ground either way must lie
-   below the falling object (its lowest point at the fall's first and last frames, within
+   below the object's lowest point in frame 0, which is in the air (within
    :data:`CLEARANCE_SLACK_PX`): a touch whose ground does not is set aside for the rest's.
 3. **The world frame** follows the dataset's conventions (z up, ground z = 0): the camera on the
    +x side looking towards −x, pitched down by θ, and the object's frame-0 centre above the origin.
@@ -35,8 +35,8 @@ freely for a few frames before it lands.
 Errors: ``InputError`` when the fall shows in fewer than :data:`MIN_FALL_FRAMES` frames
 (:data:`SEGMENTER_MIN_FALL_FRAMES` with the mask segmenter's masks; a drop from near the ground,
 or a clip that starts after the release): then the video does not show the scale, and the user
-must give ``--camera``; and when the ground read from the rest lies above the falling object
-(the fall, the touch and the rest contradict each other).
+must give ``--camera``; and when the ground read from the rest lies above the object's lowest
+point in frame 0 (the fall, the touch and the rest contradict each other).
 """
 
 from __future__ import annotations
@@ -107,9 +107,9 @@ MAX_READ_SIZE_M = 3.0
 # shown is too short or its masks too noisy (a clip that starts just before the landing); the
 # validation drops of this look never went past ×2.6 (docs/usage.md, camera and ground)
 MAX_SIZE_FACTOR = 3.0
-# A ground read above the falling object's lowest point (at the fall's first or last frame) by
-# more than this many pixels (at the object's depth) contradicts the fall: a touch read then is
-# set aside for the rest, and a rest read then is refused; within it, the masks' own rim
+# A ground read above the object's lowest point in frame 0 (in the air: the clip starts in its
+# fall) by more than this many pixels (at the object's depth) contradicts the fall: a touch read
+# then is set aside for the rest, and a rest read then is refused; within it, the masks' rim
 CLEARANCE_SLACK_PX = 1.0
 # The drop height's 10–90 % interval: the size's relative error times the height, beside this
 # floor (metres, one standard deviation) for what the scale does not carry: the touch's timing,
@@ -604,13 +604,13 @@ def estimate_camera(
     # and a ball's by its radius: taken halfway between the two (BELOW_DEPTH_SHARE)
     lean = BELOW_DEPTH_SHARE * 0.5 * track.width[0] * math.sin(pitch)
     below = (track.bottom[0] - track.centroid[0, 1] - lean) * metres_per_px
-    start, end = positions(params, np.array([0.0, (count - 1) * frame_dt]))  # the fall's ends
 
     def clearance(camera_height: float) -> float:
-        """Metres from the ground read to the object's lowest point, at the lower of the fall's
-        first and last frames: a falling object is above the ground over its whole fall (the
-        path is a parabola, so its lowest point over the fall is at one end)."""
-        return camera_height - max(float(start @ down), float(end @ down)) - below
+        """Metres from the ground read up to the object's lowest point in frame 0 (the drop
+        height): the clip starts in the air, so it is above the ground then. (Not at the fall's
+        last frame: a parabola's fit can run a frame or two past a soft landing. With a touch
+        at t_c this is also the lowest the object comes over [0, t_c], a parabola's ends.)"""
+        return camera_height - float(params[:3] @ down) - below
 
     def from_touch(contact: float) -> float:
         """The camera's height above the ground (module doc, 2): the centre at the touch plus
@@ -644,7 +644,7 @@ def estimate_camera(
     if not clearance(camera_height) > -slack:
         raise InputError(
             f"the ground read from the video is {-clearance(camera_height) * 100:.1f} cm above "
-            "the falling object's lowest point (from where it "
+            "the falling object's lowest point in frame 0 (from where it "
             f"{'rests' if set_aside is None else 'rests and where it first touches'}): the "
             "fall, the touch or the rest is not read well; give the camera with --camera FILE",
             source="camera from the video",
@@ -670,7 +670,7 @@ def estimate_camera(
         contact_set_aside_s=set_aside,
         touch=touch,
         scale_spread=math.hypot(SCALE_ERROR_FACTOR * depth_error, SCALE_ERROR_FLOOR),
-        drop_height=float(camera_height - params[:3] @ down - below),
+        drop_height=clearance(camera_height),
     )
     low, high = estimate.size_factor_10_90
     if not high <= MAX_SIZE_FACTOR:
