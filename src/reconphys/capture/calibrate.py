@@ -630,7 +630,7 @@ def estimate_camera(
         return float(near * bottom @ down)
 
     contact = touch_s if ground_from_touch else None
-    set_aside = None  # a touch whose ground the falling object would pass through
+    set_aside = None  # a touch whose ground lies above the object in frame 0
     slack = CLEARANCE_SLACK_PX * metres_per_px
     if contact is not None and not clearance(from_touch(contact)) > -slack:
         contact, set_aside = None, contact
