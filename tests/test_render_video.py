@@ -157,6 +157,75 @@ def test_the_preview_outlines_the_masks_on_the_unmasked_recording():
     assert torch.equal(shown[~green], frames[~green])
 
 
+def _falling_square(count: int, size: int) -> torch.Tensor:  # [T, H, W] a square falling down
+    masks = torch.zeros(count, size, size)
+    for t in range(count):
+        top = round(2 + (size - 12) * t / (count - 1))
+        masks[t, top : top + 6, 10:16] = 1.0
+    return masks
+
+
+def test_the_background_plate_is_the_scene_without_the_object():
+    """Each pixel the object leaves free in some frame reads the background exactly — also where
+    something else (a hand) covers it in a minority of those frames (a median, not a mean); a
+    pixel covered in every frame takes a free pixel's value; no free pixel: black."""
+    count, size = 20, 32
+    background = torch.rand(size, size, 3, generator=torch.Generator().manual_seed(3))
+    masks = _falling_square(count, size)
+    masks[:, 24:30, 2:8] = 1.0  # something that never moves: never free
+    frames = background.expand(count, -1, -1, -1).clone()
+    frames[masks.bool()] = torch.tensor([1.0, 0.0, 0.0])  # the object, red
+    frames[:3, 0:4, 20:30] = torch.tensor([0.9, 0.8, 0.7])  # a hand, in 3 frames, not in the masks
+    plate = preview.background_plate(frames, masks)
+    margin = max(1, round(preview.PLATE_MARGIN * size))
+    widened = torch.nn.functional.max_pool2d(masks[:, None], 2 * margin + 1, 1, margin)[:, 0]
+    free = (widened < 0.5).any(0)  # [H, W] free in some frame
+    picks = np.unique(np.linspace(0, count - 1, preview.PLATE_FRAMES).round().astype(int))
+    free_in_picks = (widened[picks] < 0.5).any(0)
+    assert free_in_picks.float().mean() > 0.5 and not free_in_picks[27, 5]
+    assert torch.equal(plate[free_in_picks], background[free_in_picks])
+    assert torch.equal(plate[0:4, 20:30], background[0:4, 20:30])  # the hand left out
+    values = {tuple(v) for v in background[free].tolist()}
+    assert all(tuple(v) in values for v in plate[~free_in_picks].tolist())
+    covered = torch.ones(count, size, size)
+    assert torch.equal(preview.background_plate(frames, covered), torch.zeros(size, size, 3))
+
+
+def test_the_simulated_panel_is_laid_over_the_plate():
+    """``rgb + (1 − alpha)·plate`` for colour premultiplied on black (render_sequence's)."""
+    plate = torch.tensor([0.2, 0.4, 0.6]).expand(2, 3, 3)
+    rendered = torch.zeros(1, 2, 3, 4)
+    rendered[0, 0, 0] = torch.tensor([0.5, 0.5, 0.5, 1.0])  # opaque grey
+    rendered[0, 0, 1] = torch.tensor([0.25, 0.0, 0.0, 0.5])  # half-covered red
+    laid = preview.over_plate(rendered, plate)[0]
+    assert torch.allclose(laid[0, 0], torch.tensor([0.5, 0.5, 0.5]))
+    assert torch.allclose(laid[0, 1], torch.tensor([0.35, 0.2, 0.3]))
+    assert torch.equal(laid[1], plate[1])  # nothing rendered there
+
+
+def test_render_sequence_gives_the_opacity_beside_the_colour():
+    from reconphys.assets.gaussians import Gaussians
+    from reconphys.render import dataset_views, render
+    from reconphys.render.sequence import render_sequence
+
+    generator = torch.Generator().manual_seed(5)
+    n = 40
+    gaussians = Gaussians(
+        means=(torch.rand(n, 3, generator=generator) - 0.5) * 0.4,
+        quats=torch.randn(n, 4, generator=generator),
+        log_scales=torch.full((n, 3), math.log(0.03)),
+        opacity_logits=torch.randn(n, generator=generator),
+        sh0=torch.randn(n, 3, generator=generator),
+    )
+    camera = dataset_views(24, 24, azimuths_deg=(0.0,))
+    means = gaussians.means[None] + torch.tensor([[[0.0, 0.0, 0.3]], [[0.0, 0.0, 0.2]]])
+    rgba = render_sequence(gaussians, means, camera, "torch", with_alpha=True)
+    assert rgba.shape == (2, 24, 24, 4)
+    assert torch.equal(rgba[..., :3], render_sequence(gaussians, means, camera, "torch"))
+    alpha = render(gaussians.with_means(means[1]), camera, "torch").alpha[0]
+    assert torch.equal(rgba[1, ..., 3], alpha) and alpha.max() > 0.5 and alpha.min() < 0.01
+
+
 def test_a_recordings_unmasked_frames_are_kept_beside_the_masked_ones(tmp_path):
     """``Observation.unmasked`` is what was filmed (background included); ``frames`` are those
     times the masks, as the models read them."""
@@ -170,3 +239,17 @@ def test_a_recordings_unmasked_frames_are_kept_beside_the_masked_ones(tmp_path):
                                      masks=masks, mask_source="given")  # fmt: skip
     assert torch.equal(observation.unmasked, frames)
     assert torch.equal(observation.frames, frames * masks[..., None])
+
+
+def test_a_wide_sheets_caption_is_enlarged():
+    """The caption's text grows by a whole factor with the sheet's width (its strip is the small
+    sheet's, each pixel repeated), and a narrow sheet's is as it was."""
+    lines = ["log k/m 3.00  [2.00, 4.00] (10-90 %)"]
+    narrow = preview.with_caption(np.zeros((5, 700, 3), np.uint8), lines)
+    wide = preview.with_caption(np.zeros((5, 2100, 3), np.uint8), lines)
+    factor = 2100 // preview.CAPTION_WIDTH
+    assert narrow.shape == (5 + 16, 700, 3) and wide.shape == (5 + 16 * factor, 2100, 3)
+    strip = narrow[5:]
+    assert strip.any() and strip[:, 400:].max() == 0  # text on the left
+    small = wide[5::factor, ::factor][:, :700]
+    np.testing.assert_array_equal(small, strip)

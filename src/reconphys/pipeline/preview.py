@@ -1,7 +1,10 @@
 """The preview: the observed frames beside the simulated asset, from the recording's camera.
 
-Left: the masked recording (black after its last frame). Right: the asset simulated from its
-initial state and rendered into the same camera, continuing past the recording. Panels are
+Left: the recording as filmed, with the outline of the masks ``predict`` read (black after its
+last frame). Right: the asset simulated from its initial state and rendered into the same camera
+over the recording's own background (:func:`background_plate`: the scene without the object),
+continuing past the recording, with the same outline while the recording lasts — where the
+simulated object leaves the outline, the re-simulation and the recording part. Panels are
 enlarged (nearest neighbour) to at least ``PREVIEW_MIN_SIZE`` pixels so small inputs stay visible.
 """
 
@@ -20,6 +23,10 @@ from .settings import PREVIEW_MIN_SIZE
 
 SEPARATOR = 2  # pixels of grey between the panels
 OUTLINE = (0.2, 1.0, 0.2)  # the masks' outline over the recording: what was taken for the object
+# The masks are widened by this share of the frame's longer side before the background is read
+# where they leave it free: their rim's error and the darkest part of the object's shadow
+PLATE_MARGIN = 0.03
+PLATE_FRAMES = 16  # the background is read from at most this many frames, evenly spaced
 
 
 def outlined(
@@ -42,14 +49,63 @@ def _enlarge(images: Tensor, factor: int) -> Tensor:  # [T, H, W, 3] → [T, fH,
     )
 
 
+def background_plate(
+    frames: Tensor,  # [T, H, W, 3] a static camera's recording, background included
+    masks: Tensor,  # [T, H, W] in {0, 1}: the object
+) -> Tensor:  # [H, W, 3]
+    """The scene without the object: per pixel, the (lower) median over the frames where the
+    masks, widened by ``PLATE_MARGIN`` of the frame's longer side, leave it free (a falling
+    object uncovers where it comes to rest; at most ``PLATE_FRAMES`` frames, evenly spaced); a
+    pixel covered in every frame takes the nearest free pixel's value, and with no free pixel at
+    all the plate is black."""
+    from scipy import ndimage
+
+    picks = np.unique(np.linspace(0, masks.shape[0] - 1, PLATE_FRAMES).round().astype(int))
+    frames, masks = frames[picks], masks[picks]
+    height, width = masks.shape[1:]
+    radius = max(1, round(PLATE_MARGIN * max(height, width)))
+    covered = (masks > 0.5).numpy().astype(np.uint8)
+    widened = ndimage.maximum_filter(covered, size=(1, 2 * radius + 1, 2 * radius + 1))
+    free = torch.from_numpy(widened == 0)  # [T, H, W]
+    # the lower median of the free values: the covered ones sorted last (as +inf)
+    values = torch.where(free[..., None], frames.float(), torch.tensor(math.inf))
+    values = values.permute(1, 2, 3, 0).contiguous().sort(-1).values  # [H, W, 3, T]: sorted
+    middle = ((free.sum(0) - 1).clamp(min=0) // 2)[..., None, None].expand(-1, -1, 3, 1)
+    plate = values.gather(-1, middle)[..., 0]  # [H, W, 3]
+    never = ~free.any(0)
+    if bool(never.all()):
+        return torch.zeros_like(plate)
+    if bool(never.any()):
+        _, (rows, cols) = ndimage.distance_transform_edt(never.numpy(), return_indices=True)
+        plate = plate[torch.from_numpy(rows), torch.from_numpy(cols)]
+    return plate
+
+
+def over_plate(
+    rendered: Tensor,  # [T, H, W, 4] colour on black and accumulated opacity (render_sequence)
+    plate: Tensor,  # [H, W, 3]
+) -> Tensor:  # [T, H, W, 3]
+    """The rendered frames laid over the background ``plate``: ``rgb + (1 − alpha)·plate``."""
+    rgb, alpha = rendered[..., :3], rendered[..., 3:]
+    return (rgb + (1.0 - alpha) * plate).clamp(0.0, 1.0)
+
+
 def simulate_and_render(
     asset: Asset, observation: Observation, num_frames: int, device="cpu", backend="auto"
 ) -> Tensor:  # [num_frames, H, W, 3] frames 0..num_frames−1 in the recording's camera
+    """The asset simulated and rendered in the recording's camera over its background (the
+    recording's :func:`background_plate`), the recorded masks' outline on its frames."""
     from ..render.sequence import render_sequence
 
     trajectory = asset.simulate(num_frames - 1, torch.device(device))
     means = asset.gaussian_means(trajectory.x[0])
-    return render_sequence(asset.gaussians, means, observation.camera.cameras(), backend).cpu()
+    cameras = observation.camera.cameras()
+    rendered = render_sequence(asset.gaussians, means, cameras, backend, with_alpha=True).cpu()
+    masks = observation.masks.cpu()
+    simulated = over_plate(rendered, background_plate(observation.unmasked.cpu(), masks))
+    shown = min(masks.shape[0], num_frames)
+    simulated[:shown] = outlined(simulated[:shown], masks[:shown])
+    return simulated
 
 
 def contact_sheet(
@@ -91,17 +147,25 @@ def side_by_side(
     return to_uint8(torch.cat([left, bar, right], dim=2))
 
 
+CAPTION_WIDTH = 800  # px of sheet per caption letter size: a wider sheet's text is enlarged
+
+
 def with_caption(image: np.ndarray, lines: list[str]) -> np.ndarray:  # [H, W, 3] → [H + h, W, 3]
-    """The image with ``lines`` of white text on a black strip below it (PIL's built-in font)."""
+    """The image with ``lines`` of white text on a black strip below it (PIL's built-in font,
+    enlarged by a whole factor for every CAPTION_WIDTH px of the image's width, so a sheet of a
+    1080p recording stays readable when it is shown smaller)."""
     from PIL import Image, ImageDraw, ImageFont
 
     font = ImageFont.load_default()
     line_height = 12
-    strip = Image.new("RGB", (image.shape[1], 4 + line_height * len(lines)), (0, 0, 0))
+    factor = max(1, image.shape[1] // CAPTION_WIDTH)
+    width = -(-image.shape[1] // factor)
+    strip = Image.new("RGB", (width, 4 + line_height * len(lines)), (0, 0, 0))
     draw = ImageDraw.Draw(strip)
     for i, line in enumerate(lines):
         draw.text((4, 2 + line_height * i), line, fill=(255, 255, 255), font=font)
-    return np.concatenate([image, np.asarray(strip, dtype=np.uint8)], axis=0)
+    strip = np.asarray(strip, dtype=np.uint8).repeat(factor, 0).repeat(factor, 1)
+    return np.concatenate([image, strip[:, : image.shape[1]]], axis=0)
 
 
 def interval_lines(observables: dict[str, float], intervals: dict | None) -> list[str]:

@@ -16,8 +16,11 @@ def render_sequence(
     cameras: Cameras,  # one camera (C = 1), no batch dims
     backend: str = "auto",
     progress: bool = False,
-) -> Tensor:  # [T, H, W, 3] colour in [0, 1], black background
-    """Render the moved Gaussians frame by frame (bounded memory) on ``means``' device."""
+    with_alpha: bool = False,
+) -> Tensor:  # [T, H, W, 3] colour in [0, 1], black background; with_alpha: [T, H, W, 4]
+    """Render the moved Gaussians frame by frame (bounded memory) on ``means``' device; with
+    ``with_alpha`` the accumulated opacity is the fourth channel (the colour stays on black:
+    over a background ``b`` the frame is ``rgb + (1 − alpha)·b``)."""
     device = means.device
     gaussians = gaussians.to(device)
     cameras = cameras.to(device)
@@ -29,5 +32,8 @@ def render_sequence(
     images = []
     with torch.no_grad():
         for t in frames:
-            images.append(render(gaussians.with_means(means[t]), cameras, backend).rgb[0])
+            out = render(gaussians.with_means(means[t]), cameras, backend)
+            images.append(
+                torch.cat([out.rgb[0], out.alpha[0][..., None]], -1) if with_alpha else out.rgb[0]
+            )
     return torch.stack(images)
