@@ -253,3 +253,31 @@ def test_a_wide_sheets_caption_is_enlarged():
     assert strip.any() and strip[:, 400:].max() == 0  # text on the left
     small = wide[5::factor, ::factor][:, :700]
     np.testing.assert_array_equal(small, strip)
+
+
+def test_a_large_recording_is_previewed_smaller():
+    """Above PREVIEW_MAX_SIDE the preview's frames are area-averaged, its masks kept where they
+    cover half a pixel and K scaled with them (the object's pixel stays the object's); a small
+    recording is shown as it is."""
+    from reconphys.capture.observation import stored_observation
+
+    count, height, width = 3, 2 * preview.PREVIEW_MAX_SIDE, 3 * preview.PREVIEW_MAX_SIDE // 2
+    frames = torch.rand(count, height, width, 3, generator=torch.Generator().manual_seed(7))
+    masks = torch.zeros(count, height, width)
+    for t in range(count):  # a falling square on 2 × 2-pixel cells: whole pixels at half the size
+        masks[t, 100 + 20 * t : 140 + 20 * t, 60:100] = 1.0
+    K = torch.tensor([[500.0, 0.0, width / 2], [0.0, 500.0, height / 2], [0.0, 0.0, 1.0]])
+    observation = stored_observation(frames, K, torch.eye(4), 0.03, "test", masks=masks,
+                                     mask_source="given")  # fmt: skip
+    shown, shown_masks, camera = preview.preview_view(observation)
+    assert shown.shape == (count, height // 2, width // 2, 3)
+    assert (camera.width, camera.height) == (width // 2, height // 2)
+    pooled = frames.reshape(count, height // 2, 2, width // 2, 2, 3).mean((2, 4))
+    assert torch.allclose(shown, pooled, atol=1e-6)
+    assert torch.equal(shown_masks, masks[:, ::2, ::2])
+    assert torch.allclose(camera.K[:2].float(), K[:2] / 2)
+    cut = np.s_[:, 90:190, 50:110]  # 100 × 60 px about the square
+    small = stored_observation(frames[cut], K, torch.eye(4), 0.03, "test", masks=masks[cut],
+                               mask_source="given")  # fmt: skip
+    kept = preview.preview_view(small)
+    assert torch.equal(kept[0], frames[cut]) and kept[2] is small.camera

@@ -678,6 +678,7 @@ def write_outputs(
         contact_sheet,
         interval_lines,
         outlined,
+        preview_view,
         side_by_side,
         simulate_and_render,
         with_caption,
@@ -692,9 +693,9 @@ def write_outputs(
         if preview_frames > 0:
             started = time.perf_counter()
             count = max(preview_frames, result.observation.num_frames)
-            simulated = simulate_and_render(result.asset, result.observation, count, device)
-            observation = result.observation
-            observed = outlined(observation.unmasked, observation.masks)  # the masks as read
+            frames, masks, camera = preview_view(result.observation)
+            simulated = simulate_and_render(result.asset, frames, masks, camera, count, device)
+            observed = outlined(frames, masks)  # the masks as read
             video = side_by_side(observed, simulated)
             write_mp4(staging / "preview.mp4", video, fps=1.0 / result.asset.physics.frame_dt)
             sheet = contact_sheet(observed, simulated)

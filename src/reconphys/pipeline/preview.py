@@ -5,7 +5,8 @@ last frame). Right: the asset simulated from its initial state and rendered into
 over the recording's own background (:func:`background_plate`: the scene without the object),
 continuing past the recording, with the same outline while the recording lasts — where the
 simulated object leaves the outline, the re-simulation and the recording part. Panels are
-enlarged (nearest neighbour) to at least ``PREVIEW_MIN_SIZE`` pixels so small inputs stay visible.
+enlarged (nearest neighbour) to at least ``PREVIEW_MIN_SIZE`` pixels so small inputs stay visible,
+and a large recording is shown (and the asset rendered) at most ``PREVIEW_MAX_SIDE`` pixels a side.
 """
 
 from __future__ import annotations
@@ -18,8 +19,9 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from ..assets.asset import Asset
-from ..capture import Observation
-from .settings import PREVIEW_MIN_SIZE
+from ..capture import CameraSpec, Observation
+from ..capture.video import working_size
+from .settings import PREVIEW_MAX_SIDE, PREVIEW_MIN_SIZE
 
 SEPARATOR = 2  # pixels of grey between the panels
 OUTLINE = (0.2, 1.0, 0.2)  # the masks' outline over the recording: what was taken for the object
@@ -90,8 +92,31 @@ def over_plate(
     return (rgb + (1.0 - alpha) * plate).clamp(0.0, 1.0)
 
 
+def preview_view(
+    observation: Observation, max_side: int = PREVIEW_MAX_SIDE
+) -> tuple[Tensor, Tensor, CameraSpec]:
+    """The recording as filmed [T, h, w, 3], its masks [T, h, w] in {0, 1} and its camera at the
+    preview's size: at most ``max_side`` px a side (the frames area-averaged, a pixel in the
+    masks where they cover at least half of it, K scaled), the recording's own where it fits."""
+    frames, masks, camera = observation.unmasked.cpu(), observation.masks.cpu(), observation.camera
+    height, width = masks.shape[1:]
+    size = working_size(width, height, max_side)
+    if size == (width, height):
+        return frames, masks, camera
+    shape = (size[1], size[0])
+    frames = F.interpolate(frames.permute(0, 3, 1, 2), size=shape, mode="area").permute(0, 2, 3, 1)
+    masks = (F.interpolate(masks[:, None].float(), size=shape, mode="area")[:, 0] >= 0.5).float()
+    return frames, masks, camera.resized(*size)
+
+
 def simulate_and_render(
-    asset: Asset, observation: Observation, num_frames: int, device="cpu", backend="auto"
+    asset: Asset,
+    frames: Tensor,  # [T_obs, H, W, 3] the recording as filmed (preview_view)
+    masks: Tensor,  # [T_obs, H, W] in {0, 1}
+    camera: CameraSpec,  # at (W, H)
+    num_frames: int,
+    device="cpu",
+    backend="auto",
 ) -> Tensor:  # [num_frames, H, W, 3] frames 0..num_frames−1 in the recording's camera
     """The asset simulated and rendered in the recording's camera over its background (the
     recording's :func:`background_plate`), the recorded masks' outline on its frames."""
@@ -99,10 +124,9 @@ def simulate_and_render(
 
     trajectory = asset.simulate(num_frames - 1, torch.device(device))
     means = asset.gaussian_means(trajectory.x[0])
-    cameras = observation.camera.cameras()
+    cameras = camera.cameras()
     rendered = render_sequence(asset.gaussians, means, cameras, backend, with_alpha=True).cpu()
-    masks = observation.masks.cpu()
-    simulated = over_plate(rendered, background_plate(observation.unmasked.cpu(), masks))
+    simulated = over_plate(rendered, background_plate(frames, masks))
     shown = min(masks.shape[0], num_frames)
     simulated[:shown] = outlined(simulated[:shown], masks[:shown])
     return simulated
