@@ -597,3 +597,43 @@ def test_the_track_on_the_masks_bounding_box_is_the_whole_frames():
     masks[3] = 0.0
     with pytest.raises(InputError, match="empty in frame 3"):
         mask_track(masks)
+
+
+def _segmented_disc_fall(size: int = 32, scale: int = 5, seed: int = 1) -> torch.Tensor:
+    """[30, size·scale, size·scale] masks of a disc falling then resting, drawn at ``size`` px
+    with a random rim (about a pixel there, as the segmenter's) and enlarged ``scale`` times (as
+    its logits are brought to a larger recording's size)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:size, :size] + 0.5
+    masks = np.zeros((30, size, size), np.float32)
+    for t in range(30):
+        fallen = min(t, 9) * 0.03  # seconds of fall: it lands at frame 9
+        centre_y, centre_x = 6.0 + 0.5 * 392.0 * fallen**2, 16.0 + 10.0 * fallen
+        radius = 4.0 + rng.uniform(-0.6, 0.6)
+        masks[t] = (yy - centre_y) ** 2 + (xx - centre_x) ** 2 <= radius**2
+    return torch.from_numpy(masks).repeat_interleave(scale, 1).repeat_interleave(scale, 2)
+
+
+def test_the_segmenters_masks_are_read_to_its_own_pixel(tmp_path):
+    """A recording larger than the segmenter's size gets its masks enlarged from it: their error
+    is a pixel there, ``scale`` of theirs. The fall is read to that (``segmented_pixel``): a clip
+    whose fall the rule before cut to 3 frames and refused is read over its 8."""
+    from reconphys.capture.calibrate import SEGMENTER_FALL_FIT_PX
+    from reconphys.capture.observation import load_observation, segmented_pixel
+    from reconphys.render.video import write_mp4
+
+    masks = _segmented_disc_fall()
+    assert segmented_pixel(masks, {"segmented_size": [32, 32]}) == 5.0
+    assert segmented_pixel(masks, {"segmented_size": [160, 160]}) == 1.0
+    assert segmented_pixel(masks, None) == segmented_pixel(masks, {"expected_iou": 0.9}) == 1.0
+    floor = np.random.default_rng(0).uniform(60, 200, (1, 160, 160, 3)).astype(np.uint8)
+    write_mp4(tmp_path / "drop.mp4", np.repeat(floor, 30, 0), fps=1 / 0.03)  # a static camera
+
+    def read(rating: dict):
+        return load_observation(tmp_path / "drop.mp4", segment=lambda rgb: (masks.clone(), rating))
+
+    observation = read({"segmented_size": [32, 32]})
+    assert observation.fall_fit_px == 5 * SEGMENTER_FALL_FIT_PX
+    assert observation.camera_estimate["fall_frames"] == 8
+    with pytest.raises(InputError, match="falls freely in 3 frame"):
+        read({})  # the masks' own pixel: the rule before

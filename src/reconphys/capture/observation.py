@@ -164,6 +164,17 @@ def _plausible(masks: Tensor) -> bool:
     return all(main_region_share(mask) >= MIN_MAIN_REGION_SHARE for mask in masks[:3])
 
 
+def segmented_pixel(masks: Tensor, rating: dict | None) -> float:
+    """How many pixels of ``masks`` [T, H, W] one pixel spans at the size they were segmented at
+    (the rating's ``segmented_size``, [width, height]; 1 without it): the segmenter's masks are
+    right to about a pixel there, so the fall is read to that many of their own pixels (a phone's
+    1080p clip is read at 640 px and segmented at 128: 5)."""
+    size = (rating or {}).get("segmented_size")
+    if not size:
+        return 1.0
+    return max(1.0, masks.shape[2] / size[0], masks.shape[1] / size[1])
+
+
 def main_region_share(mask: Tensor) -> float:  # [H, W] → share in [0, 1]; 0 when empty
     """The share of a mask's pixels in its largest connected region (8-neighbourhood)."""
     from scipy import ndimage
@@ -317,7 +328,7 @@ def load_observation(
                 "not the backdrop)"
             )
             black = False
-            fit_px = SEGMENTER_FALL_FIT_PX
+            fit_px = SEGMENTER_FALL_FIT_PX * segmented_pixel(chosen, rating)
     time_resampling = "the recorded frames"
     if between.any():  # picks is sorted: each wanted frame's pair by its place in it
         rgb, chosen, objects = frames_between(

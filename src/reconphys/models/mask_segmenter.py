@@ -465,12 +465,13 @@ def rated_segment_clip(
     colours: bool = True,
 ) -> tuple[Tensor, dict]:
     """segment_clip's masks [T, H, W] and how sure they are (:func:`mask_rating`, at the
-    segmented size: what its numbers were fitted on)."""
+    segmented size: what its numbers were fitted on), with ``segmented_size`` [width, height]:
+    the size the masks were read at (their pixel error is a pixel there)."""
     frames = _checked(frames)
     small = segmented_size(frames, max_side)
     logits = clip_logits(model, small, max_side, bfloat16=bfloat16, track=track, colours=colours)
     masks = keep_main_blob(logits > 0)
-    rating = mask_rating(logits, masks)
+    rating = {**mask_rating(logits, masks), "segmented_size": [small.shape[2], small.shape[1]]}
     if small.shape != frames.shape:  # clip_logits' own resampling of a large clip
         size = frames.shape[1:3]
         logits = F.interpolate(logits[:, None], size=size, mode="bilinear")[:, 0]
