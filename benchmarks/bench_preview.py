@@ -18,12 +18,9 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 from bench_predict import export_video, first_test_sample
-from common import machine_description
-from PIL import Image
+from common import enlarged_video, machine_description
 
-from reconphys.capture.video import read_video
 from reconphys.pipeline.predict import predict
 from reconphys.pipeline.preview import (
     contact_sheet,
@@ -65,11 +62,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         video = export_video(args.data, first_test_sample(args.data), tmp / "bundle") / "video.mp4"
-        frames, fps = read_video(video)[:2]
-        large = np.stack([np.asarray(Image.fromarray(f).resize((1080, 1080))) for f in frames])
-        write_mp4(tmp / "large.mp4", large[..., :3], fps=fps or 1 / 0.03)
+        large = enlarged_video(video, tmp / "large.mp4")
         print(f"{'recording':12s} {'panel':>9s} {'seconds':>8s}   {'panel':>9s} {'seconds':>8s}")
-        for name, path in (("as recorded", video), ("1080 × 1080", tmp / "large.mp4")):
+        for name, path in (("as recorded", video), ("1080 × 1080", large)):
             result = predict(str(path), refine=False)
             capped = preview_seconds(result, PREVIEW_MAX_SIDE, args.frames, tmp, args.repeats)
             whole = preview_seconds(result, 10**6, args.frames, tmp, args.repeats)

@@ -96,6 +96,21 @@ def user_bundle(dataset, index: int, folder: Path, item: dict | None = None) -> 
     return bundle
 
 
+def enlarged_video(video: Path, out: Path, side: int = 1080) -> Path:
+    """The frames of ``video`` resized to ``side`` × ``side`` (PIL's bicubic: a phone's size, the
+    clip's own detail), written as the mp4 ``out`` at the clip's rate → ``out``."""
+    import numpy as np
+    from PIL import Image
+
+    from reconphys.capture.video import read_video
+    from reconphys.render.video import write_mp4
+
+    frames, fps = read_video(video)[:2]
+    large = np.stack([np.asarray(Image.fromarray(f).resize((side, side))) for f in frames])
+    write_mp4(out, large[..., :3], fps=fps or 1 / 0.03)
+    return out
+
+
 def predict_bundle(bundle: Path, **options):
     """``reconphys.predict`` on a :func:`user_bundle` (mp4 + camera file + the true Gaussians)."""
     import reconphys

@@ -1,12 +1,13 @@
 """The camera read from the same clip at the data's size and enlarged to a phone's 1080 × 1080
 (docs/usage.md#the-segmenters-pixel-at-a-phones-size).
 
-For each test sample of a realistic-look dataset (view 0), brought in as a user would (``data
-video``: the mp4 alone), ``predict``'s own reading (``pipeline.samples.load_input``: the mask
-segmenter, the camera from the fall, 45° assumed) of the mp4 as it is and of the same frames
-enlarged to 1080 × 1080 (PIL's bicubic: a phone's size, the 128-px clip's detail; read at 640 px,
-segmented at 128). Scale and drop-height errors as ``realistic_input.py`` (``common.
-camera_read_errors``, the true K brought to the masks' size), refusals, fall frames.
+For each test sample of a realistic-look dataset (view 0), brought in as a user would
+(``common.user_bundle``: the stored mp4 alone), ``predict``'s own reading
+(``pipeline.samples.load_input``: the mask segmenter, the camera from the fall, 45° assumed) of
+the mp4 as it is and of the same frames enlarged to 1080 × 1080 (``common.enlarged_video``: a
+phone's size, the 128-px clip's detail; read at 640 px, segmented at 128). Scale and
+drop-height errors as ``realistic_input.py`` (``common.camera_read_errors``, the true K brought
+to the masks' size), refusals, fall frames.
 
     python benchmarks/phone_size.py data/mval128_41 --out rows.json [--limit 36]
 """
@@ -15,21 +16,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
-from common import camera_read_errors, machine_description
-from PIL import Image
+from common import camera_read_errors, enlarged_video, machine_description, user_bundle
 
 import reconphys.capture.observation as observation
-from reconphys.capture.video import read_video
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
 from reconphys.pipeline.samples import load_input
-from reconphys.render.video import write_mp4
 from reconphys.threads import set_cpu_threads
 
 
@@ -56,13 +53,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for index in range(count):
             item = dataset[index]
-            bundle = Path(tmp) / item["id"]
-            command = [sys.executable, "-m", "reconphys.cli", "data", "video", args.data]
-            subprocess.run([*command, item["id"], str(bundle)], check=True, capture_output=True)
-            frames, fps = read_video(bundle / "video.mp4")[:2]
-            size = (args.side, args.side)
-            large = np.stack([np.asarray(Image.fromarray(f).resize(size)) for f in frames])
-            write_mp4(bundle / "large.mp4", large[..., :3], fps=fps or 1 / 0.03)
+            bundle = user_bundle(dataset, index, Path(tmp), item)
+            enlarged_video(bundle / "video.mp4", bundle / "large.mp4", args.side)
             anchors = item["anchors"].double()
             lowest = anchors[0][anchors[0][:, 2].argmin()]
             true_K = item["K"][0].double()
@@ -78,7 +70,7 @@ def main() -> None:
                     row[name] = {"refused": str(e)}
                     continue
                 K = true_K.clone()
-                K[:2] *= read["width"] / frames.shape[2]
+                K[:2] *= read["width"] / item["frames"].shape[3]
                 row[name] = camera_read_errors(
                     read["estimate"], K, item["world_to_cam"][0], anchors[0].mean(0), lowest
                 )

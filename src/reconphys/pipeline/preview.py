@@ -20,7 +20,6 @@ from torch import Tensor
 
 from ..assets.asset import Asset
 from ..capture import CameraSpec, Observation
-from ..capture.video import working_size
 from .settings import PREVIEW_MAX_SIDE, PREVIEW_MIN_SIZE
 
 SEPARATOR = 2  # pixels of grey between the panels
@@ -98,15 +97,14 @@ def preview_view(
     """The recording as filmed [T, h, w, 3], its masks [T, h, w] in {0, 1} and its camera at the
     preview's size: at most ``max_side`` px a side (the frames area-averaged, a pixel in the
     masks where they cover at least half of it, K scaled), the recording's own where it fits."""
+    from ..models.mask_segmenter import segmented_size  # a clip area-averaged to max_side
+
     frames, masks, camera = observation.unmasked.cpu(), observation.masks.cpu(), observation.camera
-    height, width = masks.shape[1:]
-    size = working_size(width, height, max_side)
-    if size == (width, height):
+    if max(masks.shape[1:]) <= max_side:
         return frames, masks, camera
-    shape = (size[1], size[0])
-    frames = F.interpolate(frames.permute(0, 3, 1, 2), size=shape, mode="area").permute(0, 2, 3, 1)
-    masks = (F.interpolate(masks[:, None].float(), size=shape, mode="area")[:, 0] >= 0.5).float()
-    return frames, masks, camera.resized(*size)
+    frames = segmented_size(frames, max_side)
+    masks = (segmented_size(masks[..., None].float(), max_side)[..., 0] >= 0.5).float()
+    return frames, masks, camera.resized(frames.shape[2], frames.shape[1])
 
 
 def simulate_and_render(
