@@ -412,6 +412,43 @@ def test_a_touch_must_brake_the_fall_by_at_least_g(braking_g, found):
         assert read is None
 
 
+def test_a_touch_is_read_in_the_masks_own_pixels():
+    """The same landing seen 5× larger, in masks whose own pixel is 5 image pixels (the
+    segmenter's 128-px reading brought to 640): read at the same time. A push of 6 image pixels,
+    a touch in exact masks, is a rim's flicker in those masks (under CONTACT_MIN_PX of their
+    pixels): not taken."""
+    from reconphys.capture.calibrate import (
+        CONTACT_MIN_PX,
+        FALL_FIT_PX,
+        SEGMENTER_FALL_FIT_PX,
+        _Track,
+        contact_time,
+        mask_pixel,
+    )
+
+    assert mask_pixel(FALL_FIT_PX) == mask_pixel(SEGMENTER_FALL_FIT_PX) == 1.0
+    assert mask_pixel(5 * SEGMENTER_FALL_FIT_PX) == 5.0
+    dt, count, frames, touch = 0.03, 10, 16, 9.4 * 0.03
+
+    def track(scale: float, push_px: float) -> _Track:  # a push of push_px by count + 2
+        t = np.arange(frames) * dt
+        height = -push_px * np.clip(t - touch, 0, None) ** 2 / ((count + 2) * dt - touch) ** 2
+        return _Track(
+            centroid=scale * np.stack([np.zeros(frames), height], 1),
+            bottom=np.zeros(frames),
+            width=np.ones(frames),
+            area=np.ones(frames),
+        )
+
+    metres_per_px = 0.005  # 6 px by 2.6 frames after the touch: a brake of ~4 g
+    found = contact_time(track(1, 6.0), count, dt, np.zeros(frames), metres_per_px)
+    assert found == pytest.approx(touch, abs=0.001)
+    enlarged = contact_time(track(5, 6.0), count, dt, np.zeros(frames), metres_per_px / 5, pixel=5)
+    assert enlarged == pytest.approx(found, abs=1e-9)
+    assert 6.0 < CONTACT_MIN_PX * 5
+    assert contact_time(track(1, 6.0), count, dt, np.zeros(frames), metres_per_px, pixel=5) is None
+
+
 def test_the_size_interval_holds_the_truth_and_widens_with_a_shorter_fall():
     """The object's size read from the fall comes with a 10–90 % interval (prediction.json's
     size_factor_10_90): it holds the true size over the read one for cameras near the pitch
@@ -617,7 +654,8 @@ def _segmented_disc_fall(size: int = 32, scale: int = 5, seed: int = 1) -> torch
 def test_the_segmenters_masks_are_read_to_its_own_pixel(tmp_path):
     """A recording larger than the segmenter's size gets its masks enlarged from it: their error
     is a pixel there, ``scale`` of theirs. The fall is read to that (``segmented_pixel``): a clip
-    whose fall the rule before cut to 3 frames and refused is read over its 8."""
+    whose fall the rule before cut to 3 frames and refused is read over 9 of the 10 on its
+    parabola (the landing frame is left out: the bottom is within a pixel of its lowest)."""
     from reconphys.capture.calibrate import SEGMENTER_FALL_FIT_PX
     from reconphys.capture.observation import load_observation, segmented_pixel
     from reconphys.render.video import write_mp4
@@ -634,6 +672,6 @@ def test_the_segmenters_masks_are_read_to_its_own_pixel(tmp_path):
 
     observation = read({"segmented_size": [32, 32]})
     assert observation.fall_fit_px == 5 * SEGMENTER_FALL_FIT_PX
-    assert observation.camera_estimate["fall_frames"] == 8
+    assert observation.camera_estimate["fall_frames"] == 9
     with pytest.raises(InputError, match="falls freely in 3 frame"):
         read({})  # the masks' own pixel: the rule before

@@ -659,6 +659,31 @@ def test_a_release_from_rest_comes_back_at_rest_and_a_slow_toss_does_not(dataset
     assert abs(float(fitted[1]) - 0.3) < 0.1 and abs(float(fitted[2])) < 0.1
 
 
+def test_the_velocity_is_read_in_the_masks_own_pixels(dataset):
+    """A segmenter's masks read at 48 px and brought to 240 (each pixel 5 of the image's, the
+    camera's K ×5): with ``pixel=5`` the same velocity and standard error as the 48-px masks',
+    a toss and a release from rest alike. Weighed in the image's pixels instead, the prior and
+    the noise floors count 25× less against the same errors, and the reading moves."""
+    from dataclasses import replace
+
+    from reconphys.data.dataset import DropDataset
+
+    gaussians = DropDataset(dataset).asset(0).gaussians
+    for velocity, seed in ((torch.tensor([0.4, 0.3, 0.5]), 0), (torch.zeros(3), 1)):
+        masks, camera = _rendered_fall(gaussians, velocity, size=48, frames=8)
+        masks = rim_noise(masks, np.random.default_rng(seed))
+        large = masks.repeat_interleave(5, 1).repeat_interleave(5, 2)
+        K = camera.K.clone()
+        K[:2] *= 5
+        enlarged = replace(camera, K=K, width=240, height=240)
+        small = linear_velocity_fit(gaussians.means, masks, camera, 0.03, fall=8)
+        read = linear_velocity_fit(gaussians.means, large, enlarged, 0.03, fall=8, pixel=5)
+        for a, b in zip(small, read, strict=True):
+            torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5)
+        image = linear_velocity_fit(gaussians.means, large, enlarged, 0.03, fall=8)
+        assert float((image[1] - small[1]).abs().max()) > 1e-3
+
+
 def test_noisy_masks_are_read_closer_over_the_whole_fall(dataset):
     """Masks that gain or lose a pixel's rim at random per frame (as the segmenter's do): four
     frames read that noise as velocity, the whole free fall (``fall``, placement.FALL_WINDOW_LESS)

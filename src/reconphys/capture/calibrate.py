@@ -10,7 +10,8 @@ freely for a few frames before it lands.
    (world down seen by a camera pitched down by θ). Gravity is known in metres, so the fit
    gives P0 and V0 in metres: the object's distance, its size, its speed. The masks' growth
    (``√(area_t / area_0) = z_0 / z_t``) adds the motion along the view; a prior on θ
-   (:data:`PITCH_PRIOR_DEG` ± :data:`PITCH_PRIOR_SPREAD_DEG`) keeps what the fall does not show.
+   (:data:`PITCH_PRIOR_DEG` ± :data:`PITCH_PRIOR_SPREAD_DEG`, against a residual of one of the
+   masks' own pixels: :func:`mask_pixel`) keeps what the fall does not show.
    A wrong focal length scales the distance, not the object: the size and the motion in metres
    follow from gravity and the pixels alone. The fit's standard error of the depth (widened,
    :data:`SCALE_ERROR_FACTOR`, :data:`SCALE_ERROR_FLOOR`) gives the size's 10–90 % interval.
@@ -227,6 +228,15 @@ def mask_track(masks: Tensor) -> _Track:
     return _Track(*(np.array(x) for x in (centroid, bottom, width, area)))
 
 
+def mask_pixel(fit_px: float) -> float:
+    """The masks' own pixel in the image's pixels, read from their fall tolerance ``fit_px``
+    (SEGMENTER_FALL_FIT_PX × observation.segmented_pixel for the mask segmenter's): 1 for exact
+    masks and for the segmenter's at its own size, 5 for its masks of a 128-px reading brought to
+    640 px. The rules' pixel thresholds (LANDED_PIXELS, CONTACT_MIN_PX, CLEARANCE_SLACK_PX) are
+    in these pixels: a pixel's rim at 128 px is five at 640."""
+    return max(1.0, fit_px / SEGMENTER_FALL_FIT_PX)
+
+
 def fall_frames(track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX) -> int:
     """How many frames from frame 0 the centroid (per image axis) and the bottom edge each follow
     one parabola (free fall): the longest run whose fits stay within ``fit_px`` + 2 % of the
@@ -235,7 +245,7 @@ def fall_frames(track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX) -> 
     radius = math.sqrt(track.area[0] / math.pi)
     tolerance = fit_px + 0.02 * radius
     lowest = track.bottom.max()
-    landed = int(np.nonzero(track.bottom >= lowest - LANDED_PIXELS)[0][0])
+    landed = int(np.nonzero(track.bottom >= lowest - LANDED_PIXELS * mask_pixel(fit_px))[0][0])
     count = min(3, landed)
     for n in range(4, landed + 1):
         times = np.arange(n) * frame_dt
@@ -262,6 +272,7 @@ def contact_time(
     falling: np.ndarray,  # [T] px: the fall's model of the centroid's image height, every frame
     metres_per_px: float,  # at the object's depth (its distance / the focal length in pixels)
     touch: str = "soft",  # TOUCHES: how the ground's push starts
+    pixel: float = 1.0,  # the masks' own pixel in image pixels (mask_pixel)
 ) -> float | None:
     """Seconds from frame 0 to the object's first touch of the ground, between frames: the
     centroid's image height minus the free fall's (``falling``, the fall's fit carried on) is
@@ -270,9 +281,10 @@ def contact_time(
     also be lost at once) over the fall's last 3 frames and :data:`CONTACT_FRAMES_AFTER` after
     it; least squares with a, c ≥ 0, t_c on a grid from 3 frames before the fall's end to 1
     after it. None when the clip ends before it shows the touch, or when the fitted push moves
-    the centroid less than :data:`CONTACT_MIN_PX` by the window's last frame or less than a
-    brake of :data:`CONTACT_MIN_G`·g would over the same time (for the soft push: 2c px/s² ×
-    ``metres_per_px`` ≥ CONTACT_MIN_G·g): a drift of a badly read fall."""
+    the centroid less than :data:`CONTACT_MIN_PX` of the masks' own pixels (``pixel`` image
+    pixels each) by the window's last frame or less than a brake of :data:`CONTACT_MIN_G`·g
+    would over the same time (for the soft push: 2c px/s² × ``metres_per_px`` ≥
+    CONTACT_MIN_G·g): a drift of a badly read fall."""
     check_touch(touch)
     frames = len(track.area)
     if frames < count + CONTACT_FRAMES_AFTER:
@@ -294,7 +306,7 @@ def contact_time(
     after = linear[index, -1]  # seconds from the touch to the window's last frame
     push = sum(k * t[index, -1] for k, t in zip(coefficients, terms, strict=True))  # px by then
     brake = 0.5 * CONTACT_MIN_G * GRAVITY_MAGNITUDE * after**2  # metres a 1-g brake takes
-    if push < CONTACT_MIN_PX or push * metres_per_px < brake:
+    if push < CONTACT_MIN_PX * pixel or push * metres_per_px < brake:
         return None
     return float(candidates[index])
 
@@ -327,11 +339,16 @@ def _fit_fall(
     frame_dt: float,
     K: np.ndarray,  # [3, 3]
     gravity: np.ndarray | None = None,  # [3] m/s² in the camera frame; None: pitch fitted
+    pixel: float = 1.0,  # the masks' own pixel in image pixels (mask_pixel)
 ):
     """Least-squares fit of the free fall to the masks' centroid and growth (module doc, 1).
     Returns ``(params, positions, rms_px, depth_error)``: params = P0 [3], V0 [3] (camera frame,
     metres, m/s) and the pitch (radians; the prior's where ``gravity`` is given), positions(params,
-    t) → [F, 3], and the depth's standard error relative to it (the residuals as the noise)."""
+    t) → [F, 3], and the depth's standard error relative to it (the residuals as the noise).
+
+    The residuals are weighed in the masks' own pixels (image pixels / ``pixel``) against the
+    pitch prior's one standard deviation: a 128-px reading brought to 640 px is no surer of its
+    fall than at 128, though each of its errors is 5 image pixels."""
     from scipy.optimize import least_squares
 
     fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
@@ -371,7 +388,7 @@ def _fit_fall(
         z = np.maximum(p[:, 2], 1e-3)
         projected = np.stack([fx * p[:, 0] / z + cx, fy * p[:, 1] / z + cy], 1)
         size = radius_px * (growth - p[0, 2] / z)
-        parts = [(projected - uv).ravel(), size]
+        parts = [(projected - uv).ravel() / pixel, size / pixel]
         if free_pitch:
             parts.append([(params[6] - pitch0) / math.radians(PITCH_PRIOR_SPREAD_DEG)])
         return np.concatenate(parts)
@@ -382,7 +399,7 @@ def _fit_fall(
         lower, upper = [*lower, math.radians(-10.0)], [*upper, math.radians(80.0)]
     fit = least_squares(residual, start, bounds=(lower, upper), x_scale="jac")
     params = fit.x if free_pitch else np.append(fit.x, pitch0)
-    rms = float(np.sqrt(np.mean(fit.fun[: 2 * count] ** 2)))
+    rms = pixel * float(np.sqrt(np.mean(fit.fun[: 2 * count] ** 2)))  # image pixels
     # the depth's standard error relative to it (the fit's residuals as the noise, linearised):
     # the object's size, distance and speeds read from the video scale with it
     noise = float(fit.fun @ fit.fun) / max(len(fit.fun) - len(fit.x), 1)
@@ -524,7 +541,8 @@ def object_depth(
     count = _free_fall_frames(track, frame_dt, fit_px)
     rotation = camera.world_to_cam[:3, :3].double().numpy()
     gravity = rotation @ np.array([0.0, 0.0, -GRAVITY_MAGNITUDE])
-    params, *_ = _fit_fall(track, count, frame_dt, camera.K.double().numpy(), gravity)
+    K = camera.K.double().numpy()
+    params, *_ = _fit_fall(track, count, frame_dt, K, gravity, mask_pixel(fit_px))
     return float(params[2])
 
 
@@ -546,11 +564,13 @@ def _fit_to_touch(
     fy, cy = float(K[1, 1]), float(K[1, 2])
     f = math.sqrt(float(K[0, 0]) * fy)
     for _ in range(3):
-        fit = _fit_fall(track, count, frame_dt, K)
+        fit = _fit_fall(track, count, frame_dt, K, pixel=mask_pixel(fit_px))
         params, positions = fit[0], fit[1]
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
         falling = fy * path[:, 1] / path[:, 2] + cy
-        contact = contact_time(track, count, frame_dt, falling, float(params[2]) / f, touch)
+        contact = contact_time(
+            track, count, frame_dt, falling, float(params[2]) / f, touch, mask_pixel(fit_px)
+        )
         if contact is None:
             break
         up_to_touch = int(contact // frame_dt) + 1  # frames 0 .. the last before the touch
@@ -631,7 +651,7 @@ def estimate_camera(
 
     contact = touch_s if ground_from_touch else None
     set_aside = None  # a touch whose ground lies above the object in frame 0
-    slack = CLEARANCE_SLACK_PX * metres_per_px
+    slack = CLEARANCE_SLACK_PX * mask_pixel(fit_px) * metres_per_px
     if contact is not None and not clearance(from_touch(contact)) > -slack:
         contact, set_aside = None, contact
     camera_height = from_touch(contact) if contact is not None else from_rest()

@@ -350,6 +350,7 @@ def linear_velocity_fit(
     prior_speed: float = VELOCITY_PRIOR_M_S,  # m/s: a weakly observed component shrinks to 0
     fall: int | None = None,  # frames of free fall read from the masks (calibrate.fall_frames)
     size_weight: float = 1.0,  # the size term's weight (SEGMENTED_SIZE_WEIGHT: segmented masks)
+    pixel: float = 1.0,  # the masks' own pixel in image pixels (calibrate.mask_pixel)
 ) -> tuple[Tensor, Tensor]:  # [3] m/s (world), [3] m/s standard error in the camera's axes
     """Linear velocity whose ballistic motion moves the projected centroid like the masks' and
     changes the apparent size like theirs, and its standard error along the camera's axes (x
@@ -366,17 +367,22 @@ def linear_velocity_fit(
     tenths of m/s towards or away from the camera. The masks' size shows it directly:
     √(area_t / area_0) = depth_0 / depth_t, weighed in pixels of the object's radius. A Gaussian
     prior of ``prior_speed`` per component, against one pixel of centroid noise, keeps what
-    neither shows at 0 (a drop from rest comes back at rest)."""
+    neither shows at 0 (a drop from rest comes back at rest).
+
+    Pixels here are the masks' own (``pixel`` image pixels each: a 128-px reading brought to
+    640 px is no surer of the motion than at 128): the prior weighs ``pixel`` times more against
+    the image's pixels, and the noise floors are ``pixel`` times theirs."""
     velocity, error = _velocity_fit(
-        means, masks, camera, frame_dt, frames, prior_speed, VELOCITY_NOISE_PX, REST_CHI2,
-        size_weight,
+        means, masks, camera, frame_dt, frames, prior_speed, VELOCITY_NOISE_PX * pixel,
+        REST_CHI2, size_weight, pixel,
     )  # fmt: skip
     if fall is None or not velocity.any() or fall - FALL_WINDOW_LESS <= frames:
         return velocity, error
     frames = fall - FALL_WINDOW_LESS
     return _velocity_fit(
-        means, masks, camera, frame_dt, frames, prior_speed, FALL_NOISE_PX, 0.0, size_weight
-    )
+        means, masks, camera, frame_dt, frames, prior_speed, FALL_NOISE_PX * pixel, 0.0,
+        size_weight, pixel,
+    )  # fmt: skip
 
 
 def _velocity_fit(
@@ -389,6 +395,7 @@ def _velocity_fit(
     noise_px: float,  # the pixel noise floor of the standard error
     rest_chi2: float,  # the test for a release from rest (0: none)
     size_weight: float,  # the size term's weight
+    pixel: float,  # the masks' own pixel in image pixels
 ) -> tuple[Tensor, Tensor]:  # [3] m/s (world), [3] m/s standard error in the camera's axes
     """:func:`linear_velocity_fit` over frames 0..frames−1."""
     used = [t for t in range(min(frames, masks.shape[0])) if float(masks[t].sum()) > 0]
@@ -406,9 +413,11 @@ def _velocity_fit(
     fall[:, 2] = -0.5 * GRAVITY_MAGNITUDE * times**2
 
     def residual(velocity: Tensor) -> tuple[Tensor, Tensor]:  # [2F + F + 3], its Jacobian
+        # the prior v · pixel / prior_speed against image pixels: v / prior_speed against the
+        # masks' own
         return velocity_residual(
             velocity, points.mean(0), times, fall[:, 2], camera, observed - offset,
-            growth, radius, float(depth0[0]), prior_speed,
+            growth, radius, float(depth0[0]), prior_speed / pixel,
         )  # fmt: skip
 
     velocity = torch.zeros(3, dtype=torch.float64)

@@ -24,6 +24,7 @@ from ..capture.calibrate import (
     MAX_READ_SIZE_M,
     SEGMENTER_FALL_FIT_PX,
     fall_frames,
+    mask_pixel,
     mask_track,
     object_depth,
     rest_depth,
@@ -50,6 +51,7 @@ def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tupl
         observation.frame_dt,
         fall=observed_fall_frames(observation),
         size_weight=SEGMENTED_SIZE_WEIGHT if segmented else 1.0,
+        pixel=mask_pixel(observation.fall_fit_px),
     )
 
 
