@@ -538,7 +538,12 @@ def test_a_camera_file_must_fit_the_fall():
     degrees of gravity's image direction); the same camera in OpenGL's convention (y up, z
     backwards) sees the object fall away from gravity, a camera under the ground is refused, and
     a clip filmed from below that ends before the landing has no ground under the object."""
-    from reconphys.capture.calibrate import check_camera_file, fall_direction
+    from reconphys.capture.calibrate import (
+        FALL_CHECK_PX,
+        SEGMENTER_FALL_FIT_PX,
+        check_camera_file,
+        fall_direction,
+    )
     from reconphys.capture.camera import CameraSpec
 
     masks, w2c, _ = ball_masks(15.0, 2.0, 0.45, 0.1)
@@ -552,6 +557,12 @@ def test_a_camera_file_must_fit_the_fall():
     assert fall_direction(masks, 0.03, opengl)[0] > 177.0
     with pytest.raises(InputError, match=r"cam.json \[world_to_cam\]: in this camera the object "):
         check_camera_file(masks, 0.03, opengl, 0.5)
+    # the fall's direction is read once it moves FALL_CHECK_PX of the masks' own pixels: not in
+    # masks whose pixel is more than moved / FALL_CHECK_PX image pixels (calibrate.mask_pixel)
+    coarse = (moved / FALL_CHECK_PX + 1) * SEGMENTER_FALL_FIT_PX
+    with pytest.raises(InputError) as refused:
+        check_camera_file(masks, 0.03, opengl, coarse)
+    assert "falls" not in str(refused.value)
     under = CameraSpec(K, camera.world_to_cam, 96, 96, 3.0, "cam.json")  # the ground 3 m up
     with pytest.raises(InputError, match="below the ground"):
         check_camera_file(masks, 0.03, under, 0.5)

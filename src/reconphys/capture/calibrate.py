@@ -232,8 +232,9 @@ def mask_pixel(fit_px: float) -> float:
     """The masks' own pixel in the image's pixels, read from their fall tolerance ``fit_px``
     (SEGMENTER_FALL_FIT_PX × observation.segmented_pixel for the mask segmenter's): 1 for exact
     masks and for the segmenter's at its own size, 5 for its masks of a 128-px reading brought to
-    640 px. The rules' pixel thresholds (LANDED_PIXELS, CONTACT_MIN_PX, CLEARANCE_SLACK_PX) are
-    in these pixels: a pixel's rim at 128 px is five at 640."""
+    640 px. The rules' pixel thresholds (LANDED_PIXELS, CONTACT_MIN_PX, CLEARANCE_SLACK_PX,
+    FALL_CHECK_PX) are in these pixels, and the fall's and the velocity's fits weigh their
+    priors against them: a pixel's rim at 128 px is five at 640."""
     return max(1.0, fit_px / SEGMENTER_FALL_FIT_PX)
 
 
@@ -485,7 +486,8 @@ def check_camera_file(masks: Tensor, frame_dt: float, camera: CameraSpec, fit_px
             field="world_to_cam",
         )
     fall = fall_direction(masks, frame_dt, camera, fit_px)
-    if fall is not None and fall[0] > MAX_FALL_ANGLE_DEG and fall[1] >= FALL_CHECK_PX:
+    moved = FALL_CHECK_PX * mask_pixel(fit_px)  # the masks' own pixels
+    if fall is not None and fall[0] > MAX_FALL_ANGLE_DEG and fall[1] >= moved:
         raise InputError(
             f"in this camera the object falls {fall[0]:.0f}° away from gravity's direction in "
             f"the image: {CAMERA_CONVENTION}; or the masks do not follow the object (give them "
