@@ -15,13 +15,18 @@ of the hand is drawn. Each clip is written as an mp4 and read as ``predict --no-
 it (the mp4 alone: the segmenter's masks, the camera from the video), two ways: ``--start
 auto`` (the release read from the masks) and ``--start`` the true release (a user who gives
 it). Printed: the answers and refusals, the mask IoU against the stored masks (frames 0–29
-after the release, and 0–4; the hand's pixels count as background), the size's and the drop
-height's errors, the initial speed (the drops are from rest: it should be ≤ 0.1 m/s), the
-release read, and how often the velocity was flagged (the first frames' masks change size:
+after the release, and 0–4; the hand's pixels count as background; read masks of a larger
+clip area-averaged to the stored size), the size's and the drop height's errors, the initial
+speed (the drops are from rest: it should be ≤ 0.1 m/s), the release read, and how often the
+velocity was flagged (the first frames' masks change size:
 ``capture.masks.FIRST_FRAMES_AREA_CHANGE``) — beside the same clips without the hand (the
 ``no_hand`` rows).
 
+With ``--side N`` each clip is enlarged to N × N before it is read (``common.enlarged_video``:
+a phone's size, the clip's own detail; read at 256 px for ``--start auto``, at 640 after it).
+
     python benchmarks/hand_release.py data/rest96 --limit 40 [--grip behind] [--json out.json]
+        [--side 1080]
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from common import enlarged_video
 
 import reconphys
 from reconphys.assets.gaussians import Gaussians
@@ -90,7 +96,10 @@ def read(path: Path, start, true_masks: np.ndarray, truth: dict) -> dict:
     except InputError as e:
         return {"refused": str(e)}
     obs = result.observation
-    masks = obs.masks.numpy() > 0.5
+    masks = obs.masks[:, None]
+    if masks.shape[-2:] != true_masks.shape[-2:]:  # an enlarged clip: at the stored size
+        masks = torch.nn.functional.interpolate(masks, true_masks.shape[-2:], mode="area")
+    masks = masks[:, 0].numpy() > 0.5
     n = min(len(masks), len(true_masks))
     velocity = result.details["initial_velocity"]
     estimate = obs.camera_estimate or {}
@@ -101,7 +110,7 @@ def read(path: Path, start, true_masks: np.ndarray, truth: dict) -> dict:
         # the object's size read / the truth (size = pixels · distance / f: the field of view
         # assumed moves the distance, not the size), and the drop height read − the truth
         "scale": (estimate.get("distance_m", float("nan")) / float(obs.camera.K[1, 1]))
-        / (truth["distance"] / truth["focal"]),
+        / (truth["distance"] / (truth["focal"] * obs.camera.height / true_masks.shape[1])),
         "drop_height_error": estimate.get("drop_height_m", float("nan")) - truth["drop_height"],
         "speed": float(np.linalg.norm(velocity["linear_m_s"])),
         "warned": "warning" in velocity,  # the first frames' masks flagged (capture/masks.py)
@@ -118,6 +127,8 @@ def main() -> None:
     parser.add_argument("--grip", choices=("front", "behind", "drawn"), default="front",
                         help="the fingers over the object's camera side, behind it, or either "
                         "(drawn per clip, as make-data --hand-share does)")  # fmt: skip
+    parser.add_argument("--side", type=int, default=None,
+                        help="enlarge each clip to SIDE x SIDE before reading it")  # fmt: skip
     parser.add_argument("--segmenter", nargs="+", type=Path, default=None,
                         help="read the masks with these weights (one file, or several "
                         "averaged) instead of the shipped ensemble's")  # fmt: skip
@@ -156,6 +167,9 @@ def main() -> None:
             write_mp4(held, to_uint8(torch.from_numpy(clip)), fps=1 / FRAME_DT)
             still = np.concatenate([frames[:1].repeat(hold, 0), frames])
             write_mp4(plain, to_uint8(torch.from_numpy(still)), fps=1 / FRAME_DT)
+            if args.side:  # a phone's size: the clips enlarged, read as predict reads them
+                held = enlarged_video(held, held.with_name(held.stem + "_large.mp4"), args.side)
+                plain = enlarged_video(plain, plain.with_name(plain.stem + "_large.mp4"), args.side)
             centre = world_to_cam[:3, :3].numpy() @ anchors.mean(0) + world_to_cam[:3, 3].numpy()
             truth = {
                 "distance": float(np.linalg.norm(centre)),  # camera to the object's centre

@@ -274,13 +274,18 @@ RELEASE_WINDOW = (3, 5)  # frames before / after the first frame that moved off 
 RELEASE_NOISE_PX2 = 0.1  # a mask centroid's squared noise (px²): below it the launch speed is noise
 
 
-def release_time(masks: Tensor, frame_dt: float) -> float | None:
+def release_time(
+    masks: Tensor,
+    frame_dt: float,
+    pixel: float = 1.0,  # the masks' own pixel in image pixels (calibrate.mask_pixel)
+) -> float | None:
     """Seconds from frame 0 of masks [T, H, W] to the release of an object held still at first
     (STILL_FRAMES or more frames overlapping frame 0's mask by IoU ≥ STILL_IOU), or None when it
     is not held (it moves from the start) or never moves. The object's centroid is at rest until
     t_r, then falls as ½ a (t − t_r)² from rest, or as v (t − t_r) + ½ a (t − t_r)² with a
     vertical launch speed where that fits clearly better (a > 0: pixels, rows down): t_r by least
-    squares, to a twentieth of a frame."""
+    squares, to a twentieth of a frame. The centroid's noise (RELEASE_NOISE_PX2) is in the masks'
+    own pixels: ``pixel``² image px² each."""
     still = still_frames(masks)
     count = masks.shape[0]
     if still < STILL_FRAMES or still >= count:
@@ -305,7 +310,8 @@ def release_time(masks: Tensor, frame_dt: float) -> float | None:
         best = int(residual.argmin())
         fits.append((float(residual[best]), float(candidates[best])))
     (rest, at_rest), (launched, at_launch) = fits
-    if math.isfinite(rest) and rest <= 2.0 * launched + RELEASE_NOISE_PX2 * len(moved):
+    noise = RELEASE_NOISE_PX2 * pixel**2 * len(moved)  # px²
+    if math.isfinite(rest) and rest <= 2.0 * launched + noise:
         return at_rest  # a drop from rest explains it as well: its release is better pinned
     return at_launch if math.isfinite(launched) else None
 

@@ -28,7 +28,13 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
-from .calibrate import FALL_FIT_PX, SEGMENTER_FALL_FIT_PX, check_camera_file, estimate_camera
+from .calibrate import (
+    FALL_FIT_PX,
+    SEGMENTER_FALL_FIT_PX,
+    check_camera_file,
+    estimate_camera,
+    mask_pixel,
+)
 from .camera import CameraSpec, default_camera, read_camera, read_intrinsics
 from .interpolate import frames_between
 from .lens import recording_fov
@@ -353,7 +359,7 @@ def load_observation(
         )
     check_masks(chosen, str(masks) if masks is not None else str(path))
     if auto:  # held still first: read the recording again from the release (or the start)
-        release = release_time(chosen, frame_dt)
+        release = release_time(chosen, frame_dt, mask_pixel(fit_px))
         return load_observation(
             path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
             touch=touch, fps=fps, frame_dt=frame_dt, start=release or 0.0, end=end,
