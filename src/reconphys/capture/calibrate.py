@@ -565,14 +565,13 @@ def _fit_to_touch(
     with that fit."""
     fy, cy = float(K[1, 1]), float(K[1, 2])
     f = math.sqrt(float(K[0, 0]) * fy)
+    pixel = mask_pixel(fit_px)
     for _ in range(3):
-        fit = _fit_fall(track, count, frame_dt, K, pixel=mask_pixel(fit_px))
+        fit = _fit_fall(track, count, frame_dt, K, pixel=pixel)
         params, positions = fit[0], fit[1]
         path = positions(params, np.arange(len(track.area)) * frame_dt)  # [T, 3] still falling
         falling = fy * path[:, 1] / path[:, 2] + cy
-        contact = contact_time(
-            track, count, frame_dt, falling, float(params[2]) / f, touch, mask_pixel(fit_px)
-        )
+        contact = contact_time(track, count, frame_dt, falling, float(params[2]) / f, touch, pixel)
         if contact is None:
             break
         up_to_touch = int(contact // frame_dt) + 1  # frames 0 .. the last before the touch
