@@ -17,7 +17,7 @@ from reconphys.capture.calibrate import (
     DROP_HEIGHT_ERROR_FLOOR_M,
     estimate_camera,
 )
-from reconphys.capture.masks import release_time
+from reconphys.capture.masks import read_release
 from reconphys.errors import InputError
 from reconphys.render.cameras import intrinsics_from_fov, look_at
 
@@ -510,15 +510,22 @@ def test_the_drop_height_is_read_with_an_interval_that_holds_it():
     assert estimate_camera(low_drop, 0.03, fov_deg=45.0).drop_height_10_90[0] == 0.0
 
 
-def _held_disc(release: float, held_row: float = 12.0, accel: float = 900.0, count: int = 30):
+def _held_disc(
+    release: float,
+    held_row: float = 12.0,
+    accel: float = 900.0,
+    count: int = 30,
+    across: float = 0.0,  # m/s to the right from the release (accel / 9.8 px a metre)
+):
     """[T, 64, 64] masks of a disc (radius 9 px) held at ``held_row`` until ``release`` seconds,
     then falling from rest, ½ accel (t − release)² pixels (rows down), frames 0.03 s apart."""
     rows, cols = torch.meshgrid(torch.arange(64.0) + 0.5, torch.arange(64.0) + 0.5, indexing="ij")
     masks = []
     for k in range(count):
-        fallen = 0.5 * accel * max(0.0, k * 0.03 - release) ** 2
-        centre = min(held_row + fallen, 50.0)
-        masks.append(((rows - centre) ** 2 + (cols - 32.0) ** 2 <= 81.0).float())
+        since = max(0.0, k * 0.03 - release)
+        centre = min(held_row + 0.5 * accel * since**2, 50.0)
+        col = 24.0 + across * accel / 9.8 * since
+        masks.append(((rows - centre) ** 2 + (cols - col) ** 2 <= 81.0).float())
     return torch.stack(masks)
 
 
@@ -527,10 +534,23 @@ def test_the_release_of_a_held_object_is_read_from_its_fall():
     a frame wherever it falls between frames; an object moving from frame 0, or never, gives
     None."""
     for release in (0.21, 0.2475, 0.3333):
-        found = release_time(_held_disc(release), 0.03)
-        assert found == pytest.approx(release, abs=0.3 * 0.03), release
-    assert release_time(_held_disc(-0.05), 0.03) is None  # falling from the start: not held
-    assert release_time(_held_disc(5.0), 0.03) is None  # never released
+        found = read_release(_held_disc(release), 0.03)
+        assert found.time_s == pytest.approx(release, abs=0.3 * 0.03), release
+        assert found.from_rest
+    assert read_release(_held_disc(-0.05), 0.03) is None  # falling from the start: not held
+    assert read_release(_held_disc(5.0), 0.03) is None  # never released
+
+
+def test_a_held_object_is_let_go_at_rest_or_thrown():
+    """read_release's ``from_rest``: a disc held, then falling from rest, is let go at rest, also
+    when its column wanders by a fraction of a pixel (a hand's fingers in its masks); the same
+    disc leaving sideways at 0.5 m/s (the slowest throw of the data) or 0.3 m/s is thrown, and
+    its speed across is read in metres from the fall's own pixels per metre."""
+    assert read_release(_held_disc(0.25), 0.03).across_m_s == pytest.approx(0.0, abs=0.02)
+    for speed in (0.3, 0.5, 1.0):
+        read = read_release(_held_disc(0.25, across=speed), 0.03)
+        assert not read.from_rest and read.across_m_s == pytest.approx(speed, rel=0.15), speed
+    assert read_release(_held_disc(0.25, across=0.1), 0.03).from_rest
 
 
 def test_the_release_is_read_in_the_masks_own_pixels():
@@ -545,10 +565,9 @@ def test_the_release_is_read_in_the_masks_own_pixels():
         if k * 0.03 > release and rng.uniform() < 0.5:
             small[k] = torch.roll(small[k], 1, 0)
     large = small.repeat_interleave(5, 1).repeat_interleave(5, 2)
-    read = release_time(small, 0.03)
-    assert read is not None
-    assert release_time(large, 0.03, 5.0) == pytest.approx(read, abs=1e-9)
-    assert abs(release_time(large, 0.03) - read) > 0.03
+    read = read_release(small, 0.03).time_s
+    assert read_release(large, 0.03, 5.0).time_s == pytest.approx(read, abs=1e-9)
+    assert abs(read_release(large, 0.03).time_s - read) > 0.03
 
 
 def test_a_camera_file_must_fit_the_fall():

@@ -310,6 +310,8 @@ def test_following_the_object_reproduces_an_exact_segmenter():
     assert all((w.bottom - w.top) * (w.right - w.left) < 0.6 * height * width for w in windowed)
     whole = [i for i, w in calls if w is None]
     assert whole[:2] == [0, 1] and {24, 25, 30} <= set(whole)  # not found; the jump
+    # frames 0–1, found whole, are segmented again in windows, as every frame after them
+    assert [i for i, _ in calls[2:4]] == [0, 1] and all(w is not None for _, w in calls[2:4])
     assert Box.of(truth[3]) == Box(7, 19, 23, 33) and Box.of(truth[24]) is None
 
 
@@ -347,6 +349,22 @@ def test_following_the_object_on_a_realistic_clip(realistic_views):
         assert torch.allclose(small, whole, atol=1e-3) and torch.equal(small > 0, whole > 0)
     hook.remove()
     assert tracked == 1  # the first clip's object spans over half the frame: whole frames
+
+
+def test_a_held_object_is_segmented_alike_in_every_held_frame(realistic_views):
+    """A clip that holds frame 0 for 8 frames before the drop, at 192 px (windows fit): the held
+    frames are segmented alike — frames 0–1 in windows as the rest, not whole, whose masks
+    differ at the edges (GroupNorm's statistics) and read as the object moving (still_frames,
+    --start auto's hold)."""
+    from reconphys.capture.masks import still_frames
+
+    model = load_mask_segmenter()
+    frames, _ = realistic_views[1]
+    big = frames.repeat_interleave(3, 1).repeat_interleave(3, 2)
+    held = torch.cat([big[:1].expand(8, -1, -1, -1), big])
+    masks = segment_clip(model, held, max_side=192, bfloat16=False)
+    assert still_frames(masks) >= 8
+    assert all(iou(masks[k : k + 1], masks[:1]) > 0.97 for k in range(8))
 
 
 def test_the_bfloat16_fast_path_matches_its_reference(realistic_views):

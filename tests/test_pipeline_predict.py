@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import imageio.v2 as imageio
 import numpy as np
@@ -353,8 +354,14 @@ def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
                             "--no-refine", "--preview-frames", "0"], tmp_path, "auto")  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "release read from the masks at 0.3" in result.output
-    read = json.loads((out / "prediction.json").read_text())["input"]
+    written = json.loads((out / "prediction.json").read_text())
+    read = written["input"]
     assert read["start_how"].startswith("read from the masks") and read["start_s"] > 0.25
+    # the hold read: let go from rest means at rest (models/reconstruct.held_then_let_go)
+    assert read["release"]["held_frames"] >= 9
+    if read["release"]["from_rest"]:
+        assert written["initial_velocity"]["released_from_rest"]
+        assert written["initial_velocity"]["how"].startswith("at rest: the recording shows")
     result, out = _predict([held, "--start", "2", "--camera", bundle / "camera.json"], tmp_path)
     assert result.exit_code == 2 and "--start" in result.output and not out.exists()
     result, out = _predict([held, "--start", "soon"], tmp_path)
@@ -639,6 +646,38 @@ def test_a_segmenters_growing_rim_is_not_read_as_motion_towards_the_camera(datas
     assert 0.6 < float(estimate[0]) < 1.4, estimate
 
 
+def test_a_hold_then_a_release_from_rest_is_read_at_rest(dataset):
+    """--start auto's hold (``observation.release``, capture.masks.read_release): an object held
+    still, then let go from rest, comes back at rest even where its masks grow as it leaves the
+    hand (a hand's fingers taken for it) and the fit alone reads them as a toss; a release read
+    as a throw keeps the fit's velocity."""
+    from scipy import ndimage
+
+    from reconphys.capture import Observation
+    from reconphys.capture.masks import Release
+    from reconphys.data.dataset import DropDataset
+    from reconphys.models.reconstruct import initial_velocity_fit
+
+    gaussians = DropDataset(dataset).asset(0).gaussians
+    masks, camera = _rendered_fall(gaussians, torch.zeros(3), size=96, frames=8)
+    grown = torch.stack(
+        [
+            torch.from_numpy(ndimage.binary_dilation(m > 0.5, iterations=k) if k else m > 0.5)
+            for m, k in zip(masks.numpy(), [0, 1, 1, 1, 2, 2, 2, 2], strict=True)
+        ]
+    ).float()
+    observation = Observation(
+        frames=grown[..., None].expand(-1, -1, -1, 3), masks=grown, camera=camera,
+        frame_dt=0.03, source="held", mask_source="a hand's fingers in them",
+    )  # fmt: skip
+    read = initial_velocity_fit(gaussians, observation)[0]
+    assert float(read.norm()) > 0.5  # read as a toss
+    held = replace(observation, release=Release(0.3, 10, True, 0.02))
+    assert torch.equal(initial_velocity_fit(gaussians, held)[0], torch.zeros(3))
+    thrown = replace(observation, release=Release(0.3, 10, False, 0.6))
+    assert torch.equal(initial_velocity_fit(gaussians, thrown)[0], read)
+
+
 def test_a_release_from_rest_comes_back_at_rest_and_a_slow_toss_does_not(dataset, monkeypatch):
     """The rest test (placement.REST_CHI2): a drop from rest is read as exactly at rest, where
     the fit alone reads a few cm/s of mask noise as motion; a toss of 0.3 m/s sideways is
@@ -857,6 +896,22 @@ def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     falling = np.stack([_square(t, top=min(2 * t, 24)) for t in range(30)]) / 255.0
     check_masks(torch.from_numpy(falling).float(), "falling")  # no error
     check_release(torch.from_numpy(falling).float(), "falling")
+
+
+def test_a_hold_without_a_fall_is_refused_with_start_auto(bundle, tmp_path):
+    """--start auto on an object held for 8 frames that then slides sideways (no fall to read
+    the release from) is refused with the --start to give, not with "--start auto" again."""
+    frames = _frame_folder(bundle, tmp_path)
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for t in range(30):
+        imageio.imwrite(masks / f"{t:03d}.png", np.roll(_square(t), min(max(0, t - 7), 12), 1))
+    _fails(
+        [frames, "--masks", masks, "--gaussians", bundle / "gaussians.ply", "--start", "auto"],
+        tmp_path,
+        "give --start SECONDS (about 0.18 here, the time in the recording where it is let go); "
+        "--start auto found no fall from the hold",
+    )
 
 
 def test_a_hidden_top_in_the_first_frames_is_flagged(bundle, tmp_path):

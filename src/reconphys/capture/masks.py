@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,7 @@ import torch
 from torch import Tensor
 
 from ..errors import InputError
+from ..physics import GRAVITY
 from .video import fit_within, list_images, read_image
 from .window import pixel_bounds
 
@@ -272,35 +274,58 @@ def still_frames(masks: Tensor) -> int:
 # the hold and the first 5 after it, t_r on a grid of a twentieth of a frame.
 RELEASE_WINDOW = (3, 5)  # frames before / after the first frame that moved off frame 0's mask
 RELEASE_NOISE_PX2 = 0.1  # a mask centroid's squared noise (px²): below it the launch speed is noise
+# A hand that opens lets the object go at rest; the fingers it withdraws, in the first frames'
+# masks, move the centroid across by a fraction of this (m/s); a throw leaves faster.
+RELEASE_ACROSS_M_S = 0.25
 
 
-def release_time(
+@dataclass(frozen=True)
+class Release:
+    """An object held still, then let go (:func:`read_release`)."""
+
+    time_s: float  # seconds from frame 0 of the masks read
+    held_frames: int  # frames still from frame 0 (masks.still_frames)
+    # let go from rest: its centroid's row falls from rest at time_s and its column moves
+    # across at most RELEASE_ACROSS_M_S
+    from_rest: bool
+    across_m_s: float  # the column's speed after the release, m/s (inf: not read at rest)
+
+
+def _explained_at_rest(rest: float, launched: float, noise: float) -> bool:
+    """A motion at rest (residual ``rest``, px²) explains the masks as well as one with a launch
+    speed (``launched``): within twice its residual and the centroid's noise."""
+    return math.isfinite(rest) and rest <= 2.0 * launched + noise
+
+
+def read_release(
     masks: Tensor,
     frame_dt: float,
     pixel: float = 1.0,  # the masks' own pixel in image pixels (calibrate.mask_pixel)
-) -> float | None:
-    """Seconds from frame 0 of masks [T, H, W] to the release of an object held still at first
-    (STILL_FRAMES or more frames overlapping frame 0's mask by IoU ≥ STILL_IOU), or None when it
-    is not held (it moves from the start) or never moves. The object's centroid is at rest until
-    t_r, then falls as ½ a (t − t_r)² from rest, or as v (t − t_r) + ½ a (t − t_r)² with a
-    vertical launch speed where that fits clearly better (a > 0: pixels, rows down): t_r by least
-    squares, to a twentieth of a frame. The centroid's noise (RELEASE_NOISE_PX2) is in the masks'
-    own pixels: ``pixel``² image px² each."""
+) -> Release | None:
+    """The release of an object held still at first (STILL_FRAMES or more frames overlapping
+    frame 0's mask [T, H, W] by IoU ≥ STILL_IOU), or None when it is not held (it moves from
+    the start) or never moves. The object's centroid row is at rest until t_r, then falls as
+    ½ a (t − t_r)² from rest, or as v (t − t_r) + ½ a (t − t_r)² with a vertical launch speed
+    where that fits clearly better (a > 0: pixels, rows down): t_r by least squares, to a
+    twentieth of a frame. ``from_rest`` when the row falls from rest and the column, over the
+    same frames, stays at the hold's as well as it moves at a speed from t_r: a hold, then a hand
+    that opens (an object thrown leaves the hand moving). The centroid's noise
+    (RELEASE_NOISE_PX2) is in the masks' own pixels: ``pixel``² image px² each."""
     still = still_frames(masks)
     count = masks.shape[0]
     if still < STILL_FRAMES or still >= count:
         return None
     seen = masks.detach().double() > 0.5
-    rows = torch.arange(masks.shape[1], dtype=torch.float64)[:, None]
-    row = (seen * rows).sum((1, 2)) / seen.sum((1, 2)).clamp_min(1)  # [T] centroid rows
-    held = float(row[: still - 2].median())
+    area = seen.sum((1, 2)).clamp_min(1)
+    row = (seen * torch.arange(masks.shape[1], dtype=torch.float64)[:, None]).sum((1, 2)) / area
+    col = (seen * torch.arange(masks.shape[2], dtype=torch.float64)).sum((1, 2)) / area
     first, last = max(0, still - RELEASE_WINDOW[0]), min(count, still + RELEASE_WINDOW[1])
     times = torch.arange(first, last, dtype=torch.float64) * frame_dt
-    moved = row[first:last] - held  # [W] pixels from the hold
+    moved = row[first:last] - float(row[: still - 2].median())  # [W] pixels from the hold
     candidates = torch.arange(max(0, still - 4) * 20, still * 20 + 1, dtype=torch.float64)
     candidates = candidates * frame_dt / 20  # [C] release times tried
     tau = (times[None] - candidates[:, None]).clamp_min(0)  # [C, W]
-    fits = []  # (least residual, its t_r): from rest (a), then with a launch speed (v, a)
+    fits = []  # (least residual, its t_r, a): from rest (a), then with a launch speed (v, a)
     for design in (0.5 * tau[..., None] ** 2, torch.stack([tau, 0.5 * tau**2], -1)):
         normal = design.transpose(1, 2) @ design
         normal = normal + 1e-9 * torch.eye(normal.shape[-1], dtype=torch.float64)
@@ -308,24 +333,46 @@ def release_time(
         residual = ((design @ fitted)[..., 0] - moved).pow(2).sum(1)
         residual[fitted[:, -1, 0] <= 0] = math.inf  # it must fall: a > 0
         best = int(residual.argmin())
-        fits.append((float(residual[best]), float(candidates[best])))
-    (rest, at_rest), (launched, at_launch) = fits
+        fits.append((float(residual[best]), float(candidates[best]), float(fitted[best, -1, 0])))
+    (rest, at_rest, accel), (launched, at_launch, _) = fits
     noise = RELEASE_NOISE_PX2 * pixel**2 * len(moved)  # px²
-    if math.isfinite(rest) and rest <= 2.0 * launched + noise:
-        return at_rest  # a drop from rest explains it as well: its release is better pinned
-    return at_launch if math.isfinite(launched) else None
+    falls_from_rest = _explained_at_rest(rest, launched, noise)
+    if falls_from_rest:  # its release is better pinned
+        time_s = at_rest
+    elif math.isfinite(launched):
+        time_s = at_launch
+    else:
+        return None
+    # across: the column's speed from the release (px/s), in m/s by the fall's pixels per metre
+    shifted = col[first:last] - float(col[: still - 2].median())  # [W] pixels from the hold
+    since = (times - time_s).clamp_min(0)  # [W] s
+    speed = float((since * shifted).sum() / (since**2).sum().clamp_min(1e-12))  # px/s
+    per_metre = accel / -GRAVITY[2]  # px/m: the fall's rows a over g
+    across = abs(speed) / per_metre if falls_from_rest else math.inf  # m/s
+    return Release(time_s, still, across <= RELEASE_ACROSS_M_S, across)
 
 
-def check_release(masks: Tensor, source: str, start: float = 0.0, frame_dt: float = 0.03) -> None:
+def check_release(
+    masks: Tensor,
+    source: str,
+    start: float = 0.0,
+    frame_dt: float = 0.03,
+    auto: bool = False,  # --start auto was asked and found no release in ``masks``
+) -> None:
     """Refuse a recording whose object stays still for STILL_FRAMES or more frames from frame 0
     (frame 0 must be the release; the first 1–2 frames of a fall from rest move less than a
     pixel), saying which ``--start`` would cut it there: about two frames before it moves."""
     still = still_frames(masks)
     if STILL_FRAMES <= still < masks.shape[0]:
         release = start + max(0, still - 2) * frame_dt
+        instead = (
+            "--start auto found no fall from the hold (the object does not leave it falling)"
+            if auto
+            else "or --start auto to read it from the fall"
+        )
         raise InputError(
             f"the object does not move in frames 0–{still - 1} ({still * frame_dt:.2f} s): frame "
             f"0 must be the release; give --start SECONDS (about {release:.2f} here, the time "
-            "in the recording where it is let go), or --start auto to read it from the fall",
+            f"in the recording where it is let go){';' if auto else ','} {instead}",
             source=source,
         )

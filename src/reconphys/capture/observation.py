@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +39,7 @@ from .camera import CameraSpec, default_camera, read_camera, read_intrinsics
 from .interpolate import frames_between
 from .lens import recording_fov
 from .masks import (
+    Release,
     alpha_masks,
     backdrop_colour,
     border_is_uniform,
@@ -46,7 +47,7 @@ from .masks import (
     check_release,
     read_background,
     read_mask_folder,
-    release_time,
+    read_release,
     subtract_background,
 )
 from .stabilize import MAX_SHAKE_SHARE, Shake, crop_margin, read_shake, steady
@@ -63,7 +64,7 @@ from .video import (
 )
 
 DATASET_CAMERA = "dataset"  # --camera dataset: the dataset's view 0 (docs/design.md#conventions)
-AUTO_START = "auto"  # --start auto: the release read from the masks (masks.release_time)
+AUTO_START = "auto"  # --start auto: the release read from the masks (masks.read_release)
 CLIP_FRAMES = 30  # frames read from the release when no end is given: the data's clips (0.87 s)
 AUTO_SEARCH_S = 10.0  # --start auto looks for the release in this many seconds from the start
 AUTO_MAX_SIDE = 256  # ... at most this many pixels a side (only the masks' centroids are read)
@@ -91,6 +92,7 @@ class Observation:
     camera_shake: dict | None = None  # the camera's shake read and taken out (stabilize.py)
     mask_rating: dict | None = None  # how sure the segmenter is of its masks (None: not segmented)
     hdr: str | None = None  # an HDR video's transfer curve ("HLG", "PQ"), read as SDR; None: SDR
+    release: Release | None = None  # --start auto: the hold and the release read (None: not)
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -359,12 +361,16 @@ def load_observation(
         )
     check_masks(chosen, str(masks) if masks is not None else str(path))
     if auto:  # held still first: read the recording again from the release (or the start)
-        release = release_time(chosen, frame_dt, mask_pixel(fit_px))
-        return load_observation(
+        release = read_release(chosen, frame_dt, mask_pixel(fit_px))
+        if release is None:  # held, then not a fall: say so, not "give --start auto"
+            check_release(chosen, str(path), 0.0, frame_dt, auto=True)
+        observation = load_observation(
             path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
-            touch=touch, fps=fps, frame_dt=frame_dt, start=release or 0.0, end=end,
-            segment=segment, min_frames=min_frames,
+            touch=touch, fps=fps, frame_dt=frame_dt,
+            start=0.0 if release is None else release.time_s, end=end, segment=segment,
+            min_frames=min_frames,
         )  # fmt: skip
+        return replace(observation, release=release)
     check_release(chosen, str(path), start, frame_dt)
     estimate, intrinsics = None, None
     dataset_camera = str(camera) == DATASET_CAMERA and not Path(camera).exists()

@@ -67,7 +67,8 @@ def predict_command(
     start: str = typer.Option(
         "0",
         help="Seconds into the recording where the object is released (frame 0), or 'auto': "
-        "read from the masks (the object held still, then falling from rest).",
+        "read from the masks (the object held still, then falling from rest; such a hold "
+        "is read as let go at rest, whatever a hand does to the first frames' masks).",
     ),
     end: float = typer.Option(
         None,

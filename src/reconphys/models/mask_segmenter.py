@@ -233,14 +233,14 @@ def clip_logits(
     1080p frame. A clip whose longer side exceeds ``max_side`` is segmented area-averaged down
     to it and the logits are resampled (bilinear) to the clip's size (docs/usage.md).
 
-    ``track`` (the default) segments frames 0–1 whole and every later frame in a window around
-    where the object's last two frames put it (:func:`tracked_logits`: 2–3× less work on a
-    128-px clip; pixels outside a window are background); a frame whose object leaves its
-    window, or is not found in it, is segmented whole. Not the same arithmetic: GroupNorm's
-    statistics are the window's, so the masks differ from the whole frame's (``track=False``,
-    the reference twin) at their edges — IoU 0.97 between the two on average over 40 test
-    drops, as close to the truth; up to a seventh of the area on a clip where the object meets
-    its shadow — measured in docs/usage.md and compared by a test.
+    ``track`` (the default) segments frames 0–1 whole to find the object, then every frame (0–1
+    again) in a window around where the object's last two frames put it (:func:`tracked_logits`:
+    2–3× less work on a 128-px clip; pixels outside a window are background); a frame whose
+    object leaves its window, or is not found in it, is segmented whole. Not the same
+    arithmetic: GroupNorm's statistics are the window's, so the masks differ from the whole
+    frame's (``track=False``, the reference twin) at their edges — IoU 0.97 between the two on
+    average over 40 test drops, as close to the truth; up to a seventh of the area on a clip
+    where the object meets its shadow — measured in docs/usage.md and compared by a test.
     A clip too small for a window smaller than TRACK_MAX_SHARE of it is segmented whole.
 
     ``channels_last`` (the fast path) hands the network its inputs pixel-major ([B, H, W, C] in
@@ -346,9 +346,12 @@ def tracked_logits(
 ) -> Tensor:
     """Logits [T, H, W] of a clip segmented in windows that follow the object (clip_logits'
     ``track``). ``run(indices, window)`` segments frames: whole (window None) or each in its
-    window. Frames 0–1 are segmented whole; then TRACK_CHUNK frames at a time, each in a window
-    of the last found box's size plus TRACK_MARGIN a side (at least TRACK_MIN_SIDE and
-    TRACK_SPAN times the box), centred where the last two boxes' motion carries it. A frame
+    window. Frames 0–1 are segmented whole to find the object, then again each in a window about
+    its box (one size, as below), so that a held object's masks do not change where the windows
+    begin (the window's GroupNorm statistics move its edges: frame 2 would differ from frames 0–1
+    as if the object had moved); then TRACK_CHUNK frames at a time, each in a window of the last
+    found box's size plus TRACK_MARGIN a side (at least TRACK_MIN_SIDE and TRACK_SPAN times the
+    box), centred where the last two boxes' motion carries it. A frame
     whose object (its main blob) is not in its window or touches an edge of it that is not the
     frame's is segmented whole again. The logits are on ``device`` (``run``'s)."""
     logits = torch.full((frames, height, width), OUTSIDE_LOGIT, device=device)
@@ -385,6 +388,14 @@ def tracked_logits(
 
     start = min(2, frames)
     whole(list(range(start)))
+    first = _first_windows(boxes[:start], height, width)
+    if first is not None:  # frames 0–1 again, in windows as every later frame is segmented
+        again = run(list(range(start)), first)
+        for index, values, box in zip(range(start), again, first, strict=True):
+            kept = logits[index].clone()
+            logits[index].fill_(OUTSIDE_LOGIT)
+            if not found(index, values, box):
+                logits[index] = kept
     while start < frames:
         chunk = list(range(start, min(start + TRACK_CHUNK, frames)))
         windows = _chunk_windows(
@@ -421,6 +432,25 @@ def _chunk_windows(
     for step in range(1, count + 1):
         top, bottom = _placed(y + step * dy, rows, height)
         left, right = _placed(x + step * dx, cols, width)
+        windows.append(Box(top, bottom, left, right))
+    return windows
+
+
+def _first_windows(boxes: list[Box | None], height: int, width: int) -> list[Box] | None:
+    """Windows (one size: the last box's, as :func:`_chunk_windows` sizes them) about each of
+    the first frames' own object boxes, or None when a box is missing or the window would be
+    the whole frame."""
+    if not boxes or any(box is None for box in boxes):
+        return None
+    sized = _chunk_windows(None, boxes[-1], 1, height, width)
+    if sized is None:
+        return None
+    rows, cols = sized[0].bottom - sized[0].top, sized[0].right - sized[0].left
+    windows = []
+    for box in boxes:
+        (y, x) = box.centre
+        top, bottom = _placed(y, rows, height)
+        left, right = _placed(x, cols, width)
         windows.append(Box(top, bottom, left, right))
     return windows
 

@@ -42,9 +42,12 @@ def initial_velocity(gaussians: Gaussians, observation: Observation) -> Tensor: 
 
 def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tuple[Tensor, Tensor]:
     """(velocity [3] m/s world frame, its standard error [3] m/s along the camera's x right,
-    y down and viewing axes) from the masks' free fall (capture.placement.linear_velocity_fit)."""
+    y down and viewing axes) from the masks' free fall (capture.placement.linear_velocity_fit);
+    at rest when the recording showed the object held still, then let go from rest
+    (``observation.release``, --start auto: capture.masks.read_release), whatever the first
+    frames' masks show (the hand that let go is in them)."""
     segmented = observation.fall_fit_px >= SEGMENTER_FALL_FIT_PX  # the segmenter's masks
-    return linear_velocity_fit(
+    velocity, error = linear_velocity_fit(
         gaussians.means,
         observation.masks,
         observation.camera,
@@ -53,6 +56,14 @@ def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tupl
         size_weight=SEGMENTED_SIZE_WEIGHT if segmented else 1.0,
         pixel=mask_pixel(observation.fall_fit_px),
     )
+    if held_then_let_go(observation):
+        velocity = torch.zeros_like(velocity)
+    return velocity, error
+
+
+def held_then_let_go(observation: Observation) -> bool:
+    """The recording shows the object held still, then let go from rest (--start auto)."""
+    return observation.release is not None and observation.release.from_rest
 
 
 def observed_fall_frames(observation: Observation) -> int | None:

@@ -50,6 +50,7 @@ from ..models.model_input import network_input
 from ..models.physics_predictor import network_sigma
 from ..models.reconstruct import (
     DETAIL_FACTOR,
+    held_then_let_go,
     initial_velocity_fit,
     object_distance,
     observed_asset,
@@ -331,7 +332,7 @@ def predict(
         "recorded_fps": observation.recorded_fps,
         "time_resampling": observation.time_resampling,
         "start_s": round(observation.start_s, 4),
-        "start_how": _start_how(start, observation.start_s),
+        "start_how": _start_how(start, observation),
         "end_s": end,
         "size": list(observation.size),  # as read (at most WORK_MAX_SIDE a side)
         "recorded_size": list(observation.recorded_size or observation.size),
@@ -339,6 +340,14 @@ def predict(
         "camera": observation.camera.source,
         "ground_height": observation.camera.ground_height,
     }
+    if observation.release is not None:  # --start auto's hold (capture/masks.read_release)
+        details["input"]["release"] = {
+            "held_frames": observation.release.held_frames,
+            "from_rest": observation.release.from_rest,
+            "across_m_s": round(observation.release.across_m_s, 4)
+            if math.isfinite(observation.release.across_m_s)
+            else None,
+        }
     if observation.camera_estimate is not None:
         details["input"]["camera_estimate"] = observation.camera_estimate
     if observation.camera_shake is not None:
@@ -372,11 +381,14 @@ def predict(
     )
 
 
-def _start_how(start: float | str, found: float) -> str:
+def _start_how(start: float | str, observation: Observation) -> str:
     """How frame 0's time in the recording was chosen (prediction.json's input.start_how)."""
     if start == "auto":
-        if found > 0:
-            return "read from the masks: held still, then falling from rest (--start auto)"
+        release = observation.release
+        if release is not None:
+            how = "let go from rest" if release.from_rest else "launched (moving when let go)"
+            held = f"held still for {release.held_frames} frames"
+            return f"read from the masks: {held}, then {how} (--start auto)"
         return "--start auto: the object moves from frame 0 (not held), kept"
     return "given (--start)" if start else "frame 0 of the recording"
 
@@ -511,11 +523,16 @@ def predict_observation(
             "angular_rad_s": [0.0, 0.0, 0.0],
             # the masks' motion is explained without a velocity (placement.REST_CHI2)
             "released_from_rest": at_rest,
-            "how": "free fall of the mask's centroid and growth of its area over frames 0–3"
-            + (
-                "; at rest: no motion beyond the masks' noise"
-                if at_rest
-                else ", then again over the whole free fall where it shows more frames"
+            "how": (
+                "at rest: the recording shows the object held still for "
+                f"{observation.release.held_frames} frames, then let go from rest (--start auto)"
+                if held_then_let_go(observation)
+                else "free fall of the mask's centroid and growth of its area over frames 0–3"
+                + (
+                    "; at rest: no motion beyond the masks' noise"
+                    if at_rest
+                    else ", then again over the whole free fall where it shows more frames"
+                )
             )
             + (
                 " (angular velocity: not estimated at rest nor without the search)"
@@ -525,7 +542,7 @@ def predict_observation(
             # |log(area_t / area_0)| over frames 0–3 (capture.masks.FIRST_FRAMES_AREA_CHANGE)
             "first_frames_area_change": round(area_change, 4),
         }
-        if area_change > FIRST_FRAMES_AREA_CHANGE:
+        if area_change > FIRST_FRAMES_AREA_CHANGE and not held_then_let_go(observation):
             details["initial_velocity"]["warning"] = (
                 f"the object's mask changes size by up to {math.exp(area_change) - 1:.0%} in "
                 "frames 0–3, more than a released object's: something in view (the hand that "
