@@ -946,6 +946,7 @@ def test_a_hidden_top_in_the_first_frames_is_flagged(bundle, tmp_path):
         assert flagged == (name == "hidden"), velocity
         assert ("warning: initial velocity: the object's mask changes size by up to"
                 in result.output) == flagged  # fmt: skip
+        assert not flagged or velocity["warning"].endswith("are read at rest)")
 
 
 def test_first_frames_agreement():

@@ -548,6 +548,12 @@ def predict_observation(
                 "frames 0–3, more than a released object's: something in view (the hand that "
                 "let it go?) hides it or is taken for it, and the velocity read from those "
                 "frames may be wrong; check preview.mp4, or give the masks with --masks DIR"
+                + (
+                    ", or, if the recording shows the object held still before it is let go, "
+                    "--start auto (a hold and a fall from rest are read at rest)"
+                    if observation.release is None
+                    else ""
+                )
             )
     angular = None
     if build_new and refine and not at_rest:  # the spin about the view, from the free fall
