@@ -672,9 +672,9 @@ def test_a_hold_then_a_release_from_rest_is_read_at_rest(dataset):
     )  # fmt: skip
     read = initial_velocity_fit(gaussians, observation)[0]
     assert float(read.norm()) > 0.5  # read as a toss
-    held = replace(observation, release=Release(0.3, 10, True, 0.02))
+    held = replace(observation, release=Release(0.3, 10, 0.02))
     assert torch.equal(initial_velocity_fit(gaussians, held)[0], torch.zeros(3))
-    thrown = replace(observation, release=Release(0.3, 10, False, 0.6))
+    thrown = replace(observation, release=Release(0.3, 10, 0.6))
     assert torch.equal(initial_velocity_fit(gaussians, thrown)[0], read)
 
 

@@ -285,10 +285,13 @@ class Release:
 
     time_s: float  # seconds from frame 0 of the masks read
     held_frames: int  # frames still from frame 0 (masks.still_frames)
-    # let go from rest: its centroid's row falls from rest at time_s and its column moves
-    # across at most RELEASE_ACROSS_M_S
-    from_rest: bool
-    across_m_s: float  # the column's speed after the release, m/s (inf: not read at rest)
+    across_m_s: float  # the column's speed after the release, m/s (inf: the row not from rest)
+
+    @property
+    def from_rest(self) -> bool:
+        """Let go from rest: the centroid's row falls from rest at ``time_s`` and its column
+        moves across at most RELEASE_ACROSS_M_S."""
+        return self.across_m_s <= RELEASE_ACROSS_M_S
 
 
 def _explained_at_rest(rest: float, launched: float, noise: float) -> bool:
@@ -307,9 +310,10 @@ def read_release(
     the start) or never moves. The object's centroid row is at rest until t_r, then falls as
     ½ a (t − t_r)² from rest, or as v (t − t_r) + ½ a (t − t_r)² with a vertical launch speed
     where that fits clearly better (a > 0: pixels, rows down): t_r by least squares, to a
-    twentieth of a frame. ``from_rest`` when the row falls from rest and the column, over the
-    same frames, stays at the hold's as well as it moves at a speed from t_r: a hold, then a hand
-    that opens (an object thrown leaves the hand moving). The centroid's noise
+    twentieth of a frame. ``from_rest`` when the row falls from rest and the column's speed
+    from t_r over the same frames, in metres by the fall's own pixels per metre (a / g), is at
+    most RELEASE_ACROSS_M_S: a hold, then a hand that opens (an object thrown leaves the hand
+    moving). The centroid's noise
     (RELEASE_NOISE_PX2) is in the masks' own pixels: ``pixel``² image px² each."""
     still = still_frames(masks)
     count = masks.shape[0]
@@ -349,7 +353,7 @@ def read_release(
     speed = float((since * shifted).sum() / (since**2).sum().clamp_min(1e-12))  # px/s
     per_metre = accel / -GRAVITY[2]  # px/m: the fall's rows a over g
     across = abs(speed) / per_metre if falls_from_rest else math.inf  # m/s
-    return Release(time_s, still, across <= RELEASE_ACROSS_M_S, across)
+    return Release(time_s, still, across)
 
 
 def check_release(
