@@ -23,7 +23,9 @@ segmenter runs in bfloat16 (``native_bfloat16``: the CPU runs it and a probe fin
 the same in float32 (the fast path's twin), and where the CPU runs bfloat16 but the probe chose
 float32, the same in bfloat16 (the ratio printed either way); then the same clip resized to
 1080 × 1080 (a phone's shorter side), the same in the middle of a 3840 × 2160 frame (a phone's
-4K) and as an iPhone's HDR (HLG, HEVC 10-bit: read as SDR), then — once, not best of — a cold
+4K) and as an iPhone's HDR (HLG, HEVC 10-bit: read as SDR), the clip held still for 10 frames
+first and read with ``--start`` at the release (the hold before it read too) and with ``--start
+auto`` (their ratios to the mp4 alone printed), then — once, not best of — a cold
 ``reconphys predict
 --no-refine --preview-frames 0`` process on the mp4, what a user waits for (interpreter, imports
 and model loads included).
@@ -148,27 +150,34 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
     del wide
     # an iPhone's HDR: the 1080 × 1080 frames as HLG, HEVC 10-bit 4:2:0 (hdr_input.py)
     write_hevc(large[..., :3], tmp / "hlg.mov", "hlg", "420", "18", lossless=False)
+    # held still for 10 frames, then the clip: --start given at the release (the hold before it
+    # read again: capture/observation._release_before), and --start auto
+    held = np.concatenate([frames[:1].repeat(10, 0), frames])
+    write_mp4(tmp / "held.mp4", held[..., :3], fps=fps or 1 / 0.03)
+    held_start = 10 / (fps or 1 / 0.03)
     print(f"# realistic: {data} sample {sample}, view 0, the mp4 alone")
     print(
         f"{'case':16s} {'size':>9s} {'gaussians':>9s} {'anchors':>7s} "
         + " ".join(f"{s:>15s}" for s in STEPS)
         + f" {'of which masks':>14s} {'all four':>9s}"
     )
-    cases = [
-        ("mp4 alone", video, None, True, True),
-        ("mp4, whole frames", video, None, False, True),  # the twin of following the object
-        ("mp4, no colours", video, None, True, False),  # the network's masks alone
-        ("mp4 1080×1080", tmp / "large.mp4", None, True, True),
-        ("mp4 3840×2160", tmp / "4k.mp4", None, True, True),
-        ("HLG 1080×1080", tmp / "hlg.mov", None, True, True),
+    cases = [  # name, file, the segmenter's bfloat16, following the object, colours, --start
+        ("mp4 alone", video, None, True, True, 0.0),
+        ("mp4, whole frames", video, None, False, True, 0.0),  # the twin of following the object
+        ("mp4, no colours", video, None, True, False, 0.0),  # the network's masks alone
+        ("held, start given", tmp / "held.mp4", None, True, True, held_start),
+        ("held, start auto", tmp / "held.mp4", None, True, True, "auto"),
+        ("mp4 1080×1080", tmp / "large.mp4", None, True, True, 0.0),
+        ("mp4 3840×2160", tmp / "4k.mp4", None, True, True, 0.0),
+        ("HLG 1080×1080", tmp / "hlg.mov", None, True, True, 0.0),
     ]
     if native_bfloat16():  # the segmenter's bfloat16 fast path is taken: time its twin too
-        cases.insert(1, ("mp4, float32 seg", video, False, True, True))
+        cases.insert(1, ("mp4, float32 seg", video, False, True, True, 0.0))
     elif bfloat16_supported():  # the probe chose float32: time bfloat16 as the twin
-        cases.insert(1, ("mp4, bfloat16 seg", video, True, True, True))
-    masks_seconds = {}
-    for name, path, bfloat16, track, colours in cases:
-        kwargs = dict(input=str(path), device=device, refine=False)
+        cases.insert(1, ("mp4, bfloat16 seg", video, True, True, True, 0.0))
+    masks_seconds, totals = {}, {}
+    for name, path, bfloat16, track, colours, start in cases:
+        kwargs = dict(input=str(path), device=device, refine=False, start=start)
         with SegmenterClock(bfloat16, track, colours):
             result = predict(**kwargs)  # warm-up: model loads, Numba, allocator
         runs = []
@@ -186,6 +195,7 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
             + f" {best['masks']:14.4f} {sum(best[s] for s in STEPS):9.4f}"
         )
         masks_seconds[name] = best["masks"]
+        totals[name] = sum(best[s] for s in STEPS)
     ratio = masks_seconds["mp4, whole frames"] / masks_seconds["mp4 alone"]
     print(f"segmenter on whole frames / following the object: {ratio:.2f}×")
     extra = masks_seconds["mp4 alone"] - masks_seconds["mp4, no colours"]
@@ -198,6 +208,8 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
         print(f"segmenter bfloat16 / float32 (the probe took float32 here): {ratio:.2f}×")
     else:
         print("segmenter in float32: this CPU does not run bfloat16 natively")
+    for name in ("held, start given", "held, start auto"):
+        print(f"{name} / the mp4 alone: {totals[name] / totals['mp4 alone']:.2f}× in all")
     out = tmp / "cold"
     command = [sys.executable, "-m", "reconphys.cli", "predict", str(video), "--no-refine"]
     command += ["--preview-frames", "0", "--out", str(out), "--device", device]

@@ -20,7 +20,13 @@ from typer.testing import CliRunner
 
 from reconphys.assets.asset import read_asset
 from reconphys.capture import default_camera, load_observation
-from reconphys.capture.placement import fit_to_mask, linear_velocity_fit, velocity_residual
+from reconphys.capture.masks import STILL_FRAMES
+from reconphys.capture.placement import (
+    GRAVITY_MAGNITUDE,
+    fit_to_mask,
+    linear_velocity_fit,
+    velocity_residual,
+)
 from reconphys.capture.video import resample_indices, resample_times
 from reconphys.cli import app
 from reconphys.errors import InputError
@@ -334,6 +340,19 @@ def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
     cut = load_observation(held, camera=bundle / "camera.json", start=0.3)
     assert cut.num_frames == original.num_frames
     assert (cut.frames - original.frames).abs().mean() < 0.01
+    # the hold before a start given is read from the frames before it (masks.read_release, as
+    # --start auto reads it), its time in the recording's seconds; not where the start given is
+    # more than GIVEN_RELEASE_SLACK_FRAMES off that release, nor where nothing is held
+    assert cut.release is not None and cut.release.held_frames >= STILL_FRAMES
+    assert cut.release.time_s == pytest.approx(0.3, abs=0.03)
+    late = load_observation(held, camera=bundle / "camera.json", start=0.36)
+    assert late.release is not None and late.release.time_s == pytest.approx(0.3, abs=0.03)
+    assert load_observation(held, camera=bundle / "camera.json", start=0.45).release is None
+    assert load_observation(bundle / "video.mp4", camera=bundle / "camera.json").release is None
+    assert (
+        load_observation(bundle / "video.mp4", start=0.15, camera=bundle / "camera.json").release
+        is None
+    )
     # from the recording's start (or too early) the object is still for 11 (6) frames: refused,
     # with the --start to give (two frames before it moves: 0.27 s; 0.3 s is the release)
     for start, release in ((0.0, "0.27"), (0.15, "0.27")):
@@ -362,6 +381,19 @@ def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
     if read["release"]["from_rest"]:
         assert written["initial_velocity"]["released_from_rest"]
         assert written["initial_velocity"]["how"].startswith("at rest: the recording shows")
+    # a start given a frame after the release: the hold before it read, and a fall from rest
+    result, out = _predict([held, "--start", "0.33", "--camera", bundle / "camera.json",
+                            "--no-refine", "--preview-frames", "0"], tmp_path, "given")  # fmt: skip
+    assert result.exit_code == 0, result.output
+    written = json.loads((out / "prediction.json").read_text())
+    read = written["input"]
+    assert read["start_how"].startswith("given (--start); before it the object is held still")
+    assert read["release"]["time_s"] == pytest.approx(0.3, abs=0.03)
+    assert "--start 0.33: before it the object is held still" in result.output
+    if read["release"]["from_rest"]:
+        fallen = 0.33 - read["release"]["time_s"]
+        velocity = written["initial_velocity"]["linear_m_s"]
+        assert velocity == pytest.approx([0, 0, -GRAVITY_MAGNITUDE * fallen], abs=1e-3)
     result, out = _predict([held, "--start", "2", "--camera", bundle / "camera.json"], tmp_path)
     assert result.exit_code == 2 and "--start" in result.output and not out.exists()
     result, out = _predict([held, "--start", "soon"], tmp_path)
@@ -674,6 +706,13 @@ def test_a_hold_then_a_release_from_rest_is_read_at_rest(dataset):
     assert float(read.norm()) > 0.5  # read as a toss
     held = replace(observation, release=Release(0.3, 10, 0.02))
     assert torch.equal(initial_velocity_fit(gaussians, held)[0], torch.zeros(3))
+    # a start given after the release (--start SECONDS, the hold read before it): falling from
+    # rest by then, g × the time since the release, downwards; at rest from a start before it
+    late = replace(held, start_s=0.36)
+    expected = torch.tensor([0.0, 0.0, -GRAVITY_MAGNITUDE * 0.06])
+    assert torch.allclose(initial_velocity_fit(gaussians, late)[0], expected, atol=1e-6)
+    early = replace(held, start_s=0.27)
+    assert torch.equal(initial_velocity_fit(gaussians, early)[0], torch.zeros(3))
     thrown = replace(observation, release=Release(0.3, 10, 0.6))
     assert torch.equal(initial_velocity_fit(gaussians, thrown)[0], read)
 

@@ -21,6 +21,7 @@ import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,7 @@ from .camera import CameraSpec, default_camera, read_camera, read_intrinsics
 from .interpolate import frames_between
 from .lens import recording_fov
 from .masks import (
+    STILL_FRAMES,
     Release,
     alpha_masks,
     backdrop_colour,
@@ -68,6 +70,12 @@ AUTO_START = "auto"  # --start auto: the release read from the masks (masks.read
 CLIP_FRAMES = 30  # frames read from the release when no end is given: the data's clips (0.87 s)
 AUTO_SEARCH_S = 10.0  # --start auto looks for the release in this many seconds from the start
 AUTO_MAX_SIDE = 256  # ... at most this many pixels a side (only the masks' centroids are read)
+# --start SECONDS: the hold before it is read from the masks of the clip read again from up to
+# this many frames before the start (masks.read_release needs STILL_FRAMES still ones), and
+# counts where its release lies within GIVEN_RELEASE_SLACK_FRAMES of the start given (a user
+# scrubbing to the release is a frame or two off; further, the start is not this release)
+HOLD_LOOKBACK_FRAMES = 10
+GIVEN_RELEASE_SLACK_FRAMES = 3
 
 
 @dataclass
@@ -92,7 +100,9 @@ class Observation:
     camera_shake: dict | None = None  # the camera's shake read and taken out (stabilize.py)
     mask_rating: dict | None = None  # how sure the segmenter is of its masks (None: not segmented)
     hdr: str | None = None  # an HDR video's transfer curve ("HLG", "PQ"), read as SDR; None: SDR
-    release: Release | None = None  # --start auto: the hold and the release read (None: not)
+    # the hold and the release read (--start auto; or before a --start SECONDS), its time_s in
+    # seconds into the recording (None: no hold read)
+    release: Release | None = None
 
     @property
     def unmasked(self) -> Tensor:  # [T, H, W, 3] what was recorded, background included
@@ -204,43 +214,48 @@ def too_short(count: int, frame_dt: float, needed: int) -> str:
     )
 
 
-def load_observation(
-    input: str | os.PathLike,
+@dataclass
+class _Clip:
+    """A stretch of the recording at frame_dt, masked: what :func:`_read_clip` read."""
+
+    rgb: Tensor  # [T, H, W, 3] in [0, 1] (steadied, cropped by ``margin``)
+    masks: Tensor  # [T, H, W] in {0, 1}
+    objects: Tensor  # [T, H, W, 3] the object on black
+    mask_source: str
+    fit_px: float  # the masks' pixel error (calibrate)
+    rating: dict | None  # how sure the segmenter is (None: not segmented)
+    black: bool  # a black backdrop (the plain look)
+    shake: Shake
+    margin: int  # pixels cropped off each side (the shake taken out)
+    read_fov: float | None  # vertical, of the cropped frame (None: a camera file gives it)
+    fov_from: str
+    recorded_fps: float | None
+    recorded_frames: int
+    recorded_size: tuple[int, int]  # (width, height) as filmed
+    filmed_size: tuple[int, int]  # (width, height) decoded, before the crop
+    time_resampling: str
+    hdr: str | None
+
+
+def _read_clip(
+    path: Path,
     *,
-    masks: str | os.PathLike | None = None,  # folder of mask images
-    background: str | os.PathLike | None = None,  # clean plate image
-    camera: str | os.PathLike | None = None,  # camera JSON (.camera), "dataset", None: estimate
-    fov_deg: float | None = None,  # vertical field of view for the estimate (None: default)
-    touch: str = "soft",  # how the object meets the ground, for the estimate (calibrate.TOUCHES)
-    fps: float | None = None,  # frame rate of a frame folder / override of the file's
-    frame_dt: float = 0.03,
-    start: float | str = 0.0,  # seconds into the recording: the release (frame 0); before it
-    # dropped. "auto": read from the masks (an object held still, then falling from rest)
-    end: float | None = None,  # seconds into the recording: frames after it dropped (None:
-    # CLIP_FRAMES frames from the start, as long as the data's clips; the rest is not decoded)
-    segment: Callable[[Tensor], Tensor | tuple[Tensor, dict]] | None = None,  # frames [T, H, W,
-    # 3] → masks [T, H, W], or the masks and how sure they are (the Observation's mask_rating)
-    min_frames: int = 0,  # fewer frames after resampling: refused before masks and camera
-) -> Observation:
-    """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input;
-    a recording with fewer than ``min_frames`` frames at ``frame_dt`` (from ``start`` to
-    ``end``) is refused as too short (:func:`too_short`) before its masks are read."""
-    auto = start == AUTO_START
-    if auto:
-        start = 0.0
-    elif isinstance(start, str):
-        raise InputError(f"expected seconds or {AUTO_START!r}, got {start!r}", field="--start")
-    path = Path(input)
-    if not path.exists():
-        raise InputError("not found", source=str(path))
-    if path.is_dir() and (path / "manifest.json").is_file():
-        raise InputError("a dataset folder: give the sample with --sample ID", source=str(path))
-    read_end = end
-    if end is None:  # a phone clip runs on for seconds after the object rests: not read
-        read_end = AUTO_SEARCH_S if auto else start + (CLIP_FRAMES - 0.5) * frame_dt
+    masks: str | os.PathLike | None,
+    background: str | os.PathLike | None,
+    camera: str | os.PathLike | None,
+    fov_deg: float | None,
+    fps: float | None,
+    frame_dt: float,
+    start: float,  # seconds into the recording of frame 0
+    read_end: float,  # seconds into the recording: no frame after it
+    side: int,  # decoded at most this many pixels a side
+    segment: Callable[[Tensor], Tensor | tuple[Tensor, dict]] | None,
+    min_frames: int,
+) -> _Clip:
+    """The frames from ``start`` to ``read_end`` at ``frame_dt``, steadied and masked
+    (load_observation's reading, before the release and the camera are read)."""
     # decode no further than that, unless a mask folder must match the recording frame for frame
     until = None if masks is not None else read_end
-    side = AUTO_MAX_SIDE if auto else WORK_MAX_SIDE  # a phone's 1080p: read smaller
     times = stamps = slowed = hdr = None
     if path.is_dir():
         count = None if until is None else math.ceil(until * (fps or 1.0 / frame_dt)) + 1
@@ -268,7 +283,7 @@ def load_observation(
         before, after, weight = resample_between(
             raw.shape[0], rate, frame_dt, start, read_end, stamps
         )
-    if not auto and len(before) < min_frames:
+    if len(before) < min_frames:
         raise InputError(too_short(len(before), frame_dt, min_frames), source=str(path))
     between = weight > 0
     # the recorded frames used: each wanted one's, or the pairs it lies between
@@ -360,18 +375,109 @@ def load_observation(
             "each recorded frame at its own time"
         )
     check_masks(chosen, str(masks) if masks is not None else str(path))
-    if auto:  # held still first: read the recording again from the release (or the start)
-        release = read_release(chosen, frame_dt, mask_pixel(fit_px))
+    return _Clip(
+        rgb=rgb,
+        masks=chosen,
+        objects=objects,
+        mask_source=mask_source,
+        fit_px=fit_px,
+        rating=rating,
+        black=black,
+        shake=shake,
+        margin=margin,
+        read_fov=read_fov,
+        fov_from=fov_from,
+        recorded_fps=recorded_fps,
+        recorded_frames=recorded,
+        recorded_size=recorded_size,
+        filmed_size=(filmed_width, filmed_height),
+        time_resampling=time_resampling,
+        hdr=hdr,
+    )
+
+
+def _release_before(
+    read: Callable[..., _Clip],
+    start: float,  # seconds into the recording: the release given (--start SECONDS)
+    read_end: float,  # the clip's
+    frame_dt: float,
+) -> Release | None:
+    """The hold before a start given and the release that ends it, where STILL_FRAMES or more
+    frames come before the start: read (masks.read_release, as --start auto reads them) from
+    the masks of the clip read again (``read``: :func:`_read_clip`) from up to
+    HOLD_LOOKBACK_FRAMES before the start to the clip's end — to its end, not a few frames past
+    the start: the segmenter's windows are sized on the whole read, and a read that ends in
+    the fall segments the hold unlike the fall (validation: releases read up to 90 ms early).
+    Its ``time_s`` in seconds into the recording; None where the frames show no hold, where the
+    release lies more than GIVEN_RELEASE_SLACK_FRAMES from ``start`` (the start given is not
+    this hold's release), or where the earlier frames cannot be read. The clip's own masks are
+    read from ``start`` as before (a read from earlier frames moves them: docs/usage.md)."""
+    lead = max(0.0, start - HOLD_LOOKBACK_FRAMES * frame_dt)
+    if start - lead < (STILL_FRAMES - 0.5) * frame_dt:  # too few frames before it to be held
+        return None
+    try:
+        before = read(start=lead, read_end=read_end, side=AUTO_MAX_SIDE, min_frames=0)
+    except InputError:  # the frames before the start are not the clip: theirs is no refusal
+        return None
+    found = read_release(before.masks, frame_dt, mask_pixel(before.fit_px))
+    if found is None or abs(lead + found.time_s - start) > GIVEN_RELEASE_SLACK_FRAMES * frame_dt:
+        return None
+    return replace(found, time_s=lead + found.time_s)
+
+
+def load_observation(
+    input: str | os.PathLike,
+    *,
+    masks: str | os.PathLike | None = None,  # folder of mask images
+    background: str | os.PathLike | None = None,  # clean plate image
+    camera: str | os.PathLike | None = None,  # camera JSON (.camera), "dataset", None: estimate
+    fov_deg: float | None = None,  # vertical field of view for the estimate (None: default)
+    touch: str = "soft",  # how the object meets the ground, for the estimate (calibrate.TOUCHES)
+    fps: float | None = None,  # frame rate of a frame folder / override of the file's
+    frame_dt: float = 0.03,
+    start: float | str = 0.0,  # seconds into the recording: the release (frame 0); before it
+    # dropped. "auto": read from the masks (an object held still, then falling from rest)
+    end: float | None = None,  # seconds into the recording: frames after it dropped (None:
+    # CLIP_FRAMES frames from the start, as long as the data's clips; the rest is not decoded)
+    segment: Callable[[Tensor], Tensor | tuple[Tensor, dict]] | None = None,  # frames [T, H, W,
+    # 3] → masks [T, H, W], or the masks and how sure they are (the Observation's mask_rating)
+    min_frames: int = 0,  # fewer frames after resampling: refused before masks and camera
+) -> Observation:
+    """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input;
+    a recording with fewer than ``min_frames`` frames at ``frame_dt`` (from ``start`` to
+    ``end``) is refused as too short (:func:`too_short`) before its masks are read."""
+    auto = start == AUTO_START
+    if auto:
+        start = 0.0
+    elif isinstance(start, str):
+        raise InputError(f"expected seconds or {AUTO_START!r}, got {start!r}", field="--start")
+    path = Path(input)
+    if not path.exists():
+        raise InputError("not found", source=str(path))
+    if path.is_dir() and (path / "manifest.json").is_file():
+        raise InputError("a dataset folder: give the sample with --sample ID", source=str(path))
+    read = partial(
+        _read_clip, path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
+        fps=fps, frame_dt=frame_dt, segment=segment,
+    )  # fmt: skip
+    release = None
+    if auto:  # held still first: the clip is read again from the release (or the start)
+        read_end = AUTO_SEARCH_S if end is None else end
+        first = read(start=0.0, read_end=read_end, side=AUTO_MAX_SIDE, min_frames=0)
+        release = read_release(first.masks, frame_dt, mask_pixel(first.fit_px))
         if release is None:  # held, then not a fall: say so, not "give --start auto"
-            check_release(chosen, str(path), 0.0, frame_dt, auto=True)
-        observation = load_observation(
-            path, masks=masks, background=background, camera=camera, fov_deg=fov_deg,
-            touch=touch, fps=fps, frame_dt=frame_dt,
-            start=0.0 if release is None else release.time_s, end=end, segment=segment,
-            min_frames=min_frames,
-        )  # fmt: skip
-        return replace(observation, release=release)
+            check_release(first.masks, str(path), 0.0, frame_dt, auto=True)
+        start = 0.0 if release is None else release.time_s
+    # a phone clip runs on for seconds after the object rests: not read
+    read_end = start + (CLIP_FRAMES - 0.5) * frame_dt if end is None else end
+    clip = read(start=start, read_end=read_end, side=WORK_MAX_SIDE, min_frames=min_frames)
+    chosen, fit_px = clip.masks, clip.fit_px
+    recorded_size, margin = clip.recorded_size, clip.margin
+    filmed_width, filmed_height = clip.filmed_size
+    height, width = chosen.shape[1:3]
     check_release(chosen, str(path), start, frame_dt)
+    if not auto and start > 0:  # a start given: the hold before it
+        release = _release_before(read, start, read_end, frame_dt)
     estimate, intrinsics = None, None
     dataset_camera = str(camera) == DATASET_CAMERA and not Path(camera).exists()
     if camera is not None and not dataset_camera:  # K alone (no pose): the pose from the video
@@ -383,10 +489,10 @@ def load_observation(
             )
     if camera is None or intrinsics is not None:  # from the video: gravity's scale, the ground
         found = estimate_camera(
-            chosen, frame_dt, read_fov, fit_px, touch=touch, intrinsics=intrinsics
+            chosen, frame_dt, clip.read_fov, fit_px, touch=touch, intrinsics=intrinsics
         )
         if intrinsics is None:
-            found.fov_from = fov_from + (" (narrowed to the steadied crop)" if margin else "")
+            found.fov_from = clip.fov_from + (" (narrowed to the steadied crop)" if margin else "")
         spec, estimate = found.camera, found.to_json()
     elif dataset_camera:
         spec = default_camera(filmed_width, filmed_height).cropped(margin, margin, width, height)
@@ -395,22 +501,23 @@ def load_observation(
         spec = spec.cropped(margin, margin, width, height)
         check_camera_file(chosen, frame_dt, spec, fit_px)
     return Observation(
-        recording=rgb,
-        frames=objects,
+        recording=clip.rgb,
+        frames=clip.objects,
         masks=chosen,
         camera=spec,
         frame_dt=frame_dt,
         source=str(path),
-        mask_source=mask_source,
-        recorded_fps=recorded_fps,
-        recorded_frames=recorded,
+        mask_source=clip.mask_source,
+        recorded_fps=clip.recorded_fps,
+        recorded_frames=clip.recorded_frames,
         camera_estimate=estimate,
-        camera_shake=shake.to_json(),
-        black_backdrop=black,
+        camera_shake=clip.shake.to_json(),
+        black_backdrop=clip.black,
         fall_fit_px=fit_px,
         start_s=start,
-        time_resampling=time_resampling,
+        time_resampling=clip.time_resampling,
         recorded_size=recorded_size,
-        mask_rating=rating,
-        hdr=hdr,
+        mask_rating=clip.rating,
+        hdr=clip.hdr,
+        release=release,
     )

@@ -68,7 +68,9 @@ def predict_command(
         "0",
         help="Seconds into the recording where the object is released (frame 0), or 'auto': "
         "read from the masks (the object held still, then falling from rest; such a hold "
-        "is read as let go at rest, whatever a hand does to the first frames' masks).",
+        "is read as let go at rest, whatever a hand does to the first frames' masks). A hold "
+        "shown before a start given is read too: the velocity is then that of a fall from rest "
+        "at the release read (within 3 frames of the start).",
     ),
     end: float = typer.Option(
         None,
@@ -176,6 +178,9 @@ def predict_command(
     read = summary.get("input", {})
     if read.get("start_how", "").startswith("read from the masks"):
         typer.echo(f"release read from the masks at {read['start_s']:.3f} s: frame 0 from there")
+    elif "release" in read:  # a start given, the hold before it read (capture/observation.py)
+        before = read["start_how"].split("; ", 1)[-1]
+        typer.echo(f"--start {read['start_s']:g}: {before}")
     if read.get("dynamic_range"):  # an HDR phone video, read as SDR
         typer.echo(f"colours: {read['dynamic_range']}")
     estimate = read.get("camera_estimate")

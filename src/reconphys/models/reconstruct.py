@@ -29,7 +29,7 @@ from ..capture.calibrate import (
     object_depth,
     rest_depth,
 )
-from ..capture.placement import SEGMENTED_SIZE_WEIGHT, linear_velocity_fit
+from ..capture.placement import GRAVITY_MAGNITUDE, SEGMENTED_SIZE_WEIGHT, linear_velocity_fit
 from ..errors import InputError
 from ..geometry import rigid_velocity
 from .model_input import frame_crop, predictor_frames, virtual_intrinsics
@@ -43,9 +43,10 @@ def initial_velocity(gaussians: Gaussians, observation: Observation) -> Tensor: 
 def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tuple[Tensor, Tensor]:
     """(velocity [3] m/s world frame, its standard error [3] m/s along the camera's x right,
     y down and viewing axes) from the masks' free fall (capture.placement.linear_velocity_fit);
-    at rest when the recording showed the object held still, then let go from rest
-    (``observation.release``, --start auto: capture.masks.read_release), whatever the first
-    frames' masks show (the hand that let go is in them)."""
+    when the recording showed the object held still, then let go from rest
+    (``observation.release``: --start auto, or the hold before a --start SECONDS;
+    capture.masks.read_release), :func:`release_velocity` instead, whatever the first frames'
+    masks show (the hand that let go is in them)."""
     segmented = observation.fall_fit_px >= SEGMENTER_FALL_FIT_PX  # the segmenter's masks
     velocity, error = linear_velocity_fit(
         gaussians.means,
@@ -57,13 +58,31 @@ def initial_velocity_fit(gaussians: Gaussians, observation: Observation) -> tupl
         pixel=mask_pixel(observation.fall_fit_px),
     )
     if held_then_let_go(observation):
-        velocity = torch.zeros_like(velocity)
+        velocity = release_velocity(observation).to(velocity)
     return velocity, error
 
 
 def held_then_let_go(observation: Observation) -> bool:
-    """The recording shows the object held still, then let go from rest (--start auto)."""
+    """The recording shows the object held still, then let go from rest (--start auto, or the
+    hold before a --start SECONDS)."""
     return observation.release is not None and observation.release.from_rest
+
+
+def fallen_since_release(observation: Observation) -> float:
+    """Seconds from the release read (``observation.release``) to frame 0: 0 with --start auto
+    (frame 0 is the release) and for a start given at or before it."""
+    if observation.release is None:
+        return 0.0
+    return max(0.0, observation.start_s - observation.release.time_s)
+
+
+def release_velocity(observation: Observation) -> Tensor:  # [3] m/s, world frame (z up)
+    """The velocity at frame 0 of an object let go from rest (:func:`held_then_let_go`): at rest
+    at the release, then falling freely — ``g · t`` downwards, t the seconds since the release
+    (:func:`fallen_since_release`; a start given a frame after it finds the object at ~0.3
+    m/s)."""
+    fallen = fallen_since_release(observation)
+    return torch.tensor([0.0, 0.0, -GRAVITY_MAGNITUDE * fallen], dtype=torch.float64)
 
 
 def observed_fall_frames(observation: Observation) -> int | None:

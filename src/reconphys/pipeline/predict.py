@@ -50,6 +50,7 @@ from ..models.model_input import network_input
 from ..models.physics_predictor import network_sigma
 from ..models.reconstruct import (
     DETAIL_FACTOR,
+    fallen_since_release,
     held_then_let_go,
     initial_velocity_fit,
     object_distance,
@@ -340,8 +341,9 @@ def predict(
         "camera": observation.camera.source,
         "ground_height": observation.camera.ground_height,
     }
-    if observation.release is not None:  # --start auto's hold (capture/masks.read_release)
+    if observation.release is not None:  # the hold read (capture/masks.read_release)
         details["input"]["release"] = {
+            "time_s": round(observation.release.time_s, 4),  # into the recording
             "held_frames": observation.release.held_frames,
             "from_rest": observation.release.from_rest,
             "across_m_s": round(observation.release.across_m_s, 4)
@@ -390,7 +392,32 @@ def _start_how(start: float | str, observation: Observation) -> str:
             held = f"held still for {release.held_frames} frames"
             return f"read from the masks: {held}, then {how} (--start auto)"
         return "--start auto: the object moves from frame 0 (not held), kept"
-    return "given (--start)" if start else "frame 0 of the recording"
+    if not start:
+        return "frame 0 of the recording"
+    release = observation.release
+    if release is None:
+        return "given (--start)"
+    how = "let go from rest" if release.from_rest else "launched (moving when let go)"
+    return (
+        f"given (--start); before it the object is held still, then {how} at "
+        f"{release.time_s:.3f} s (read from the masks)"
+    )
+
+
+def _let_go_how(observation: Observation) -> str:
+    """initial_velocity.how for an object held still, then let go from rest (models/reconstruct
+    .release_velocity)."""
+    release = observation.release
+    held = f"the recording shows the object held still for {release.held_frames} frames"
+    if observation.start_s == release.time_s:  # --start auto: frame 0 is the release
+        return f"at rest: {held}, then let go from rest (--start auto)"
+    fallen = fallen_since_release(observation)
+    if not fallen:
+        return f"at rest: {held}, then let go from rest at {release.time_s:.3f} s (--start given)"
+    return (
+        f"falling from rest: {held}, then let go from rest at {release.time_s:.3f} s, "
+        f"{fallen * 1000:.0f} ms before --start: g × that, downwards"
+    )
 
 
 def spin_estimate(
@@ -524,8 +551,7 @@ def predict_observation(
             # the masks' motion is explained without a velocity (placement.REST_CHI2)
             "released_from_rest": at_rest,
             "how": (
-                "at rest: the recording shows the object held still for "
-                f"{observation.release.held_frames} frames, then let go from rest (--start auto)"
+                _let_go_how(observation)
                 if held_then_let_go(observation)
                 else "free fall of the mask's centroid and growth of its area over frames 0–3"
                 + (
