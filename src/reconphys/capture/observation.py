@@ -12,7 +12,9 @@ Frames are resampled in time to ``frame_dt`` (a recorded frame where one falls o
 made between the two nearest: :mod:`.interpolate`) from ``start`` seconds into
 the recording (the release: frame 0; the frames before it are dropped) to ``end``, masked
 (background set to black, as in the synthetic renders the models were trained on) and kept at
-their size.
+their size. The frames before the start are read for one thing: an object held still there,
+then let go (``start="auto"``: the release read from the hold; a start given: the hold before
+it, :func:`_release_before`), which ``Observation.release`` holds.
 """
 
 from __future__ import annotations
@@ -445,7 +447,9 @@ def load_observation(
 ) -> Observation:
     """Read INPUT (see module doc) → :class:`Observation`. Raises InputError naming the input;
     a recording with fewer than ``min_frames`` frames at ``frame_dt`` (from ``start`` to
-    ``end``) is refused as too short (:func:`too_short`) before its masks are read."""
+    ``end``) is refused as too short (:func:`too_short`) before its masks are read; one whose
+    object does not move in its first STILL_FRAMES frames, as not starting at the release
+    (masks.check_release)."""
     auto = start == AUTO_START
     if auto:
         start = 0.0

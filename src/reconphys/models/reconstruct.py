@@ -82,7 +82,7 @@ def release_velocity(observation: Observation) -> Tensor:  # [3] m/s, world fram
     (:func:`fallen_since_release`; a start given a frame after it finds the object at ~0.3
     m/s)."""
     fallen = fallen_since_release(observation)
-    return torch.tensor([0.0, 0.0, -GRAVITY_MAGNITUDE * fallen], dtype=torch.float64)
+    return torch.tensor([0.0, 0.0, 0.0 - GRAVITY_MAGNITUDE * fallen], dtype=torch.float64)  # no −0
 
 
 def observed_fall_frames(observation: Observation) -> int | None:
