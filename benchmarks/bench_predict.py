@@ -25,7 +25,8 @@ float32, the same in bfloat16 (the ratio printed either way); then the same clip
 1080 × 1080 (a phone's shorter side), the same in the middle of a 3840 × 2160 frame (a phone's
 4K) and as an iPhone's HDR (HLG, HEVC 10-bit: read as SDR), the clip held still for 10 frames
 first and read with ``--start`` at the release (the hold before it read too) and with ``--start
-auto`` (their ratios to the mp4 alone printed), then — once, not best of — a cold
+auto`` (their ratios to the mp4 alone printed), the same at 1080 × 1080 held 3 s (a phone's
+video: the release later in a longer file), then — once, not best of — a cold
 ``reconphys predict
 --no-refine --preview-frames 0`` process on the mp4, what a user waits for (interpreter, imports
 and model loads included).
@@ -155,6 +156,11 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
     held = np.concatenate([frames[:1].repeat(10, 0), frames])
     write_mp4(tmp / "held.mp4", held[..., :3], fps=fps or 1 / 0.03)
     held_start = 10 / (fps or 1 / 0.03)
+    # a phone's: held 3 s at 1080 × 1080 (the start later in a longer video)
+    held_long = np.concatenate([large[:1].repeat(100, 0), large])[..., :3]
+    write_mp4(tmp / "held_1080.mp4", held_long, fps=fps or 1 / 0.03)
+    del held_long
+    held_long_start = 100 / (fps or 1 / 0.03)
     print(f"# realistic: {data} sample {sample}, view 0, the mp4 alone")
     print(
         f"{'case':16s} {'size':>9s} {'gaussians':>9s} {'anchors':>7s} "
@@ -168,6 +174,8 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
         ("held, start given", tmp / "held.mp4", None, True, True, held_start),
         ("held, start auto", tmp / "held.mp4", None, True, True, "auto"),
         ("mp4 1080×1080", tmp / "large.mp4", None, True, True, 0.0),
+        ("held 3 s, given", tmp / "held_1080.mp4", None, True, True, held_long_start),
+        ("held 3 s, auto", tmp / "held_1080.mp4", None, True, True, "auto"),
         ("mp4 3840×2160", tmp / "4k.mp4", None, True, True, 0.0),
         ("HLG 1080×1080", tmp / "hlg.mov", None, True, True, 0.0),
     ]
@@ -210,6 +218,10 @@ def realistic_rows(data: str, tmp: Path, repeats: int, device: str) -> None:
         print("segmenter in float32: this CPU does not run bfloat16 natively")
     for name in ("held, start given", "held, start auto"):
         print(f"{name} / the mp4 alone: {totals[name] / totals['mp4 alone']:.2f}× in all")
+    for name in ("held 3 s, given", "held 3 s, auto"):
+        print(
+            f"{name} (1080×1080) / the mp4 1080×1080: {totals[name] / totals['mp4 1080×1080']:.2f}×"
+        )
     out = tmp / "cold"
     command = [sys.executable, "-m", "reconphys.cli", "predict", str(video), "--no-refine"]
     command += ["--preview-frames", "0", "--out", str(out), "--device", device]

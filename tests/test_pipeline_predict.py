@@ -317,7 +317,7 @@ def test_a_long_large_recording_is_read_as_a_clip_at_the_working_size(bundle, tm
         assert (centre_b / scale - centre_a).abs().max() < 0.3
 
 
-def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
+def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path, monkeypatch):
     assert resample_indices(100, 1 / 0.03, 0.03, start=0.3).tolist() == list(range(10, 100))
     assert resample_indices(100, 1 / 0.03, 0.03, 0.3, end=0.9).tolist() == list(range(10, 31))
     times = np.array([0.0, 0.03, 0.06, 0.12, 0.15])  # a GIF's display times, end 0.15 s
@@ -345,8 +345,18 @@ def test_start_and_end_cut_the_recording_to_the_release(bundle, tmp_path):
     # more than GIVEN_RELEASE_SLACK_FRAMES off that release, nor where nothing is held
     assert cut.release is not None and cut.release.held_frames >= STILL_FRAMES
     assert cut.release.time_s == pytest.approx(0.3, abs=0.03)
+    # ... on the clip's own decoded frames (the video is decoded once)
+    import reconphys.capture.observation as observation_module
+
+    decoded = []
+    read_video = observation_module.read_video
+    monkeypatch.setattr(
+        observation_module, "read_video", lambda *a: decoded.append(a) or read_video(*a)
+    )
     late = load_observation(held, camera=bundle / "camera.json", start=0.36)
     assert late.release is not None and late.release.time_s == pytest.approx(0.3, abs=0.03)
+    assert len(decoded) == 1
+    monkeypatch.undo()
     assert load_observation(held, camera=bundle / "camera.json", start=0.45).release is None
     assert load_observation(bundle / "video.mp4", camera=bundle / "camera.json").release is None
     assert (

@@ -319,10 +319,12 @@ def read_release(
     count = masks.shape[0]
     if still < STILL_FRAMES or still >= count:
         return None
-    seen = masks.detach().double() > 0.5
-    area = seen.sum((1, 2)).clamp_min(1)
-    row = (seen * torch.arange(masks.shape[1], dtype=torch.float64)[:, None]).sum((1, 2)) / area
-    col = (seen * torch.arange(masks.shape[2], dtype=torch.float64)).sum((1, 2)) / area
+    seen = masks.detach() > 0.5
+    rows = seen.sum(2, dtype=torch.float64)  # [T, H] object pixels per row
+    cols = seen.sum(1, dtype=torch.float64)  # [T, W] per column
+    area = rows.sum(1).clamp_min(1)
+    row = rows @ torch.arange(masks.shape[1], dtype=torch.float64) / area  # [T] centroids, px
+    col = cols @ torch.arange(masks.shape[2], dtype=torch.float64) / area
     first, last = max(0, still - RELEASE_WINDOW[0]), min(count, still + RELEASE_WINDOW[1])
     times = torch.arange(first, last, dtype=torch.float64) * frame_dt
     moved = row[first:last] - float(row[: still - 2].median())  # [W] pixels from the hold

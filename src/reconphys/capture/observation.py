@@ -25,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -216,6 +217,19 @@ def too_short(count: int, frame_dt: float, needed: int) -> str:
     )
 
 
+class _Decoded(NamedTuple):
+    """A stretch of the recording decoded (:func:`_decode`)."""
+
+    raw: np.ndarray  # [T, H, W, 3|4] uint8, at most the read's side
+    recorded_fps: float | None
+    times: np.ndarray | None  # a GIF's display times [T + 1], seconds
+    recorded_size: tuple[int, int]  # (width, height) as filmed
+    stamps: np.ndarray | None  # a variable-rate video's frame times [T], seconds
+    slowed: tuple[float, float] | None  # slow motion: (filmed at, plays at) fps
+    hdr: str | None  # an HDR video's curve, read as SDR
+    fps: float | None  # the rate to read it at (given, or slow motion's filmed rate)
+
+
 @dataclass
 class _Clip:
     """A stretch of the recording at frame_dt, masked: what :func:`_read_clip` read."""
@@ -237,26 +251,21 @@ class _Clip:
     filmed_size: tuple[int, int]  # (width, height) decoded, before the crop
     time_resampling: str
     hdr: str | None
+    decoded: _Decoded  # for another read of the same stretch at the same side
 
 
-def _read_clip(
+def _decode(
     path: Path,
     *,
     masks: str | os.PathLike | None,
-    background: str | os.PathLike | None,
-    camera: str | os.PathLike | None,
-    fov_deg: float | None,
     fps: float | None,
     frame_dt: float,
-    start: float,  # seconds into the recording of frame 0
-    read_end: float,  # seconds into the recording: no frame after it
-    side: int,  # decoded at most this many pixels a side
-    segment: Callable[[Tensor], Tensor | tuple[Tensor, dict]] | None,
-    min_frames: int,
-) -> _Clip:
-    """The frames from ``start`` to ``read_end`` at ``frame_dt``, steadied and masked
-    (load_observation's reading, before the release and the camera are read)."""
-    # decode no further than that, unless a mask folder must match the recording frame for frame
+    read_end: float,
+    side: int,
+) -> _Decoded:
+    """The recording decoded up to ``read_end`` (all of it with a mask folder, which must match
+    it frame for frame), at most ``side`` pixels a side: video.read_video's, or a frame
+    folder's."""
     until = None if masks is not None else read_end
     times = stamps = slowed = hdr = None
     if path.is_dir():
@@ -276,6 +285,32 @@ def _read_clip(
             f"expected a video ({', '.join(VIDEO_SUFFIXES)}) or a folder of frames",
             source=str(path),
         )
+    return _Decoded(raw, recorded_fps, times, recorded_size, stamps, slowed, hdr, fps)
+
+
+def _read_clip(
+    path: Path,
+    *,
+    masks: str | os.PathLike | None,
+    background: str | os.PathLike | None,
+    camera: str | os.PathLike | None,
+    fov_deg: float | None,
+    fps: float | None,
+    frame_dt: float,
+    start: float,  # seconds into the recording of frame 0
+    read_end: float,  # seconds into the recording: no frame after it
+    side: int,  # decoded at most this many pixels a side
+    segment: Callable[[Tensor], Tensor | tuple[Tensor, dict]] | None,
+    min_frames: int,
+    decoded: _Decoded | None = None,  # the same read_end's and side's (None: decoded here)
+) -> _Clip:
+    """The frames from ``start`` to ``read_end`` at ``frame_dt``, steadied and masked
+    (load_observation's reading, before the release and the camera are read)."""
+    if decoded is None:
+        decoded = _decode(
+            path, masks=masks, fps=fps, frame_dt=frame_dt, read_end=read_end, side=side
+        )
+    raw, recorded_fps, times, recorded_size, stamps, slowed, hdr, fps = decoded
     if times is not None and fps is None:  # variable frame rate (GIF): the display times
         before = resample_times(times, frame_dt, start, read_end)
         after, weight = before, np.zeros(len(before))
@@ -395,6 +430,7 @@ def _read_clip(
         filmed_size=(filmed_width, filmed_height),
         time_resampling=time_resampling,
         hdr=hdr,
+        decoded=decoded,
     )
 
 
@@ -406,8 +442,9 @@ def _release_before(
 ) -> Release | None:
     """The hold before a start given and the release that ends it, where STILL_FRAMES or more
     frames come before the start: read (masks.read_release, as --start auto reads them) from
-    the masks of the clip read again (``read``: :func:`_read_clip`) from up to
-    HOLD_LOOKBACK_FRAMES before the start to the clip's end — to its end, not a few frames past
+    the masks of the clip read again (``read``: :func:`_read_clip`, on the clip's own decoded
+    frames: the same end and size) from up to HOLD_LOOKBACK_FRAMES before the start to the
+    clip's end — to its end, not a few frames past
     the start: the segmenter's windows are sized on the whole read, and a read that ends in
     the fall segments the hold unlike the fall (validation: releases read up to 90 ms early).
     Its ``time_s`` in seconds into the recording; None where the frames show no hold, where the
@@ -418,7 +455,7 @@ def _release_before(
     if start - lead < (STILL_FRAMES - 0.5) * frame_dt:  # too few frames before it to be held
         return None
     try:
-        before = read(start=lead, read_end=read_end, side=AUTO_MAX_SIDE, min_frames=0)
+        before = read(start=lead, read_end=read_end, side=WORK_MAX_SIDE, min_frames=0)
     except InputError:  # the frames before the start are not the clip: theirs is no refusal
         return None
     found = read_release(before.masks, frame_dt, mask_pixel(before.fit_px))
@@ -481,7 +518,7 @@ def load_observation(
     height, width = chosen.shape[1:3]
     check_release(chosen, str(path), start, frame_dt)
     if not auto and start > 0:  # a start given: the hold before it
-        release = _release_before(read, start, read_end, frame_dt)
+        release = _release_before(partial(read, decoded=clip.decoded), start, read_end, frame_dt)
     estimate, intrinsics = None, None
     dataset_camera = str(camera) == DATASET_CAMERA and not Path(camera).exists()
     if camera is not None and not dataset_camera:  # K alone (no pose): the pose from the video
