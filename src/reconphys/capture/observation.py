@@ -245,13 +245,8 @@ class _Clip:
     margin: int  # pixels cropped off each side (the shake taken out)
     read_fov: float | None  # vertical, of the cropped frame (None: a camera file gives it)
     fov_from: str
-    recorded_fps: float | None
-    recorded_frames: int
-    recorded_size: tuple[int, int]  # (width, height) as filmed
-    filmed_size: tuple[int, int]  # (width, height) decoded, before the crop
     time_resampling: str
-    hdr: str | None
-    decoded: _Decoded  # for another read of the same stretch at the same side
+    decoded: _Decoded  # the recording as decoded (also for another read of the same stretch)
 
 
 def _decode(
@@ -310,7 +305,7 @@ def _read_clip(
         decoded = _decode(
             path, masks=masks, fps=fps, frame_dt=frame_dt, read_end=read_end, side=side
         )
-    raw, recorded_fps, times, recorded_size, stamps, slowed, hdr, fps = decoded
+    raw, recorded_fps, times, recorded_size, stamps, slowed, _, fps = decoded
     if times is not None and fps is None:  # variable frame rate (GIF): the display times
         before = resample_times(times, frame_dt, start, read_end)
         after, weight = before, np.zeros(len(before))
@@ -424,12 +419,7 @@ def _read_clip(
         margin=margin,
         read_fov=read_fov,
         fov_from=fov_from,
-        recorded_fps=recorded_fps,
-        recorded_frames=recorded,
-        recorded_size=recorded_size,
-        filmed_size=(filmed_width, filmed_height),
         time_resampling=time_resampling,
-        hdr=hdr,
         decoded=decoded,
     )
 
@@ -513,8 +503,8 @@ def load_observation(
     read_end = start + (CLIP_FRAMES - 0.5) * frame_dt if end is None else end
     clip = read(start=start, read_end=read_end, side=WORK_MAX_SIDE, min_frames=min_frames)
     chosen, fit_px = clip.masks, clip.fit_px
-    recorded_size, margin = clip.recorded_size, clip.margin
-    filmed_width, filmed_height = clip.filmed_size
+    recorded_size, margin = clip.decoded.recorded_size, clip.margin
+    filmed_height, filmed_width = clip.decoded.raw.shape[1:3]  # decoded, before the crop
     height, width = chosen.shape[1:3]
     check_release(chosen, str(path), start, frame_dt)
     if not auto and start > 0:  # a start given: the hold before it
@@ -549,8 +539,8 @@ def load_observation(
         frame_dt=frame_dt,
         source=str(path),
         mask_source=clip.mask_source,
-        recorded_fps=clip.recorded_fps,
-        recorded_frames=clip.recorded_frames,
+        recorded_fps=clip.decoded.recorded_fps,
+        recorded_frames=clip.decoded.raw.shape[0],
         camera_estimate=estimate,
         camera_shake=clip.shake.to_json(),
         black_backdrop=clip.black,
@@ -559,6 +549,6 @@ def load_observation(
         time_resampling=clip.time_resampling,
         recorded_size=recorded_size,
         mask_rating=clip.rating,
-        hdr=clip.hdr,
+        hdr=clip.decoded.hdr,
         release=release,
     )

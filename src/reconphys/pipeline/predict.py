@@ -385,19 +385,15 @@ def predict(
 
 def _start_how(start: float | str, observation: Observation) -> str:
     """How frame 0's time in the recording was chosen (prediction.json's input.start_how)."""
-    if start == "auto":
-        release = observation.release
-        if release is not None:
-            how = "let go from rest" if release.from_rest else "launched (moving when let go)"
-            held = f"held still for {release.held_frames} frames"
-            return f"read from the masks: {held}, then {how} (--start auto)"
-        return "--start auto: the object moves from frame 0 (not held), kept"
-    if not start:
-        return "frame 0 of the recording"
     release = observation.release
     if release is None:
-        return "given (--start)"
+        if start == "auto":
+            return "--start auto: the object moves from frame 0 (not held), kept"
+        return "given (--start)" if start else "frame 0 of the recording"
     how = "let go from rest" if release.from_rest else "launched (moving when let go)"
+    if start == "auto":
+        held = f"held still for {release.held_frames} frames"
+        return f"read from the masks: {held}, then {how} (--start auto)"
     return (
         f"given (--start); before it the object is held still, then {how} at "
         f"{release.time_s:.3f} s (read from the masks)"
