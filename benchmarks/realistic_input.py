@@ -6,7 +6,9 @@ taken as a user's recording (frames only):
 
 - masks: the mask segmenter's IoU with the stored true masks (mean over frames), beside the
   temporal-median background subtraction;
-- camera and ground (capture/calibrate.py), from the segmenter's masks and from the true masks,
+- camera and ground (capture/calibrate.py), from the segmenter's masks (read to a pixel of the
+  size they were segmented at, as predict reads them: a 384-px clip segmented at 128 px to
+  three of its own) and from the true masks,
   with the vertical field of view known (a camera file without pose) or assumed (the default),
   the ground as predict reads it (from the first touch, else where the object rests) and, for
   the record, from the rest alone:
@@ -43,6 +45,7 @@ from reconphys.capture.calibrate import (
     estimate_camera,
 )
 from reconphys.capture.lens import default_fov_deg
+from reconphys.capture.observation import segmented_pixel
 from reconphys.data import DropDataset
 from reconphys.errors import InputError
 from reconphys.models.mask_segmenter import MAX_SIDE, load_mask_segmenter, rated_segment_clip
@@ -123,16 +126,17 @@ def main() -> None:
             "segment_seconds": seconds,
         }
         fov_true = math.degrees(2 * math.atan(0.5 * frames.shape[1] / float(K[1, 1])))
+        # the segmenter's masks are right to a pixel of the size they were segmented at: a clip
+        # larger than that is read to as many of its own pixels, as predict reads it
+        segmenter_px = SEGMENTER_FALL_FIT_PX * segmented_pixel(masks, rating)
         # as predict reads them (the ground from the first touch, else the rest); the last row
         # is the ground from the rest alone, the rule before the touch (for the record)
         for name, used, fov, fit_px, touch in (
             ("true_masks_true_fov", truth, fov_true, FALL_FIT_PX, True),
-            ("segmenter_true_fov", masks, fov_true, SEGMENTER_FALL_FIT_PX, True),
-            ("segmenter_default_fov", masks, None, SEGMENTER_FALL_FIT_PX, True),
-            ("segmenter_default_fov_rest", masks, None, SEGMENTER_FALL_FIT_PX, False),
-        ) + (
-            (("segmenter_45_vertical", masks, 45.0, SEGMENTER_FALL_FIT_PX, True),) if aspect else ()
-        ):
+            ("segmenter_true_fov", masks, fov_true, segmenter_px, True),
+            ("segmenter_default_fov", masks, None, segmenter_px, True),
+            ("segmenter_default_fov_rest", masks, None, segmenter_px, False),
+        ) + ((("segmenter_45_vertical", masks, 45.0, segmenter_px, True),) if aspect else ()):
             try:
                 row[name] = camera_errors(used, item, meta, fov, fit_px, touch, K)
             except InputError as e:

@@ -723,3 +723,41 @@ def test_the_segmenters_masks_are_read_to_its_own_pixel(tmp_path):
     assert observation.camera_estimate["fall_frames"] == 9
     with pytest.raises(InputError, match="falls freely in 3 frame"):
         read({})  # the masks' own pixel: the rule before
+
+
+def test_a_larger_copy_of_the_masks_reads_the_same_camera():
+    """The rules were chosen on 96–128-px clips: masks larger than CAMERA_MAX_SIDE are read at
+    that size. The same masks three times larger (each pixel 3 × 3) read the same fall, touch,
+    scale and drop height, with K three times the pixels; the rule before read them at 384 px
+    otherwise (its tolerances, and the pitch prior's weight, in the larger masks' pixels)."""
+    from reconphys.capture.calibrate import CAMERA_MAX_SIDE
+
+    masks, _, _ = ball_masks(15.0, 2.0, 0.45, 0.1, size=CAMERA_MAX_SIDE, braking_g=5.0, up=0.5)
+    large = masks.repeat_interleave(3, 1).repeat_interleave(3, 2)
+    small, big = (estimate_camera(m, 0.03, fov_deg=45.0) for m in (masks, large))
+    for name in ("distance", "drop_height", "pitch_deg", "height", "contact_s", "scale_spread"):
+        assert getattr(big, name) == pytest.approx(getattr(small, name), rel=1e-9), name
+    assert big.fall_frames == small.fall_frames
+    assert big.residual_px == pytest.approx(3 * small.residual_px)
+    assert (big.camera.width, big.camera.height) == (3 * CAMERA_MAX_SIDE, 3 * CAMERA_MAX_SIDE)
+    assert torch.allclose(big.camera.K[:2], 3 * small.camera.K[:2].double())
+    assert torch.equal(big.camera.world_to_cam, small.camera.world_to_cam)
+    # a camera file's K (no pose) is brought to the smaller masks and back the same way
+    K = big.camera.K.double()
+    given = estimate_camera(large, 0.03, intrinsics=K)
+    assert torch.allclose(given.camera.K.double(), K)
+    assert given.distance == pytest.approx(big.distance, rel=1e-6)
+
+
+def test_masks_are_read_at_the_rules_size_unless_the_object_would_vanish():
+    from reconphys.capture.calibrate import CAMERA_MAX_SIDE, rule_size_masks
+
+    masks = torch.zeros(4, 2 * CAMERA_MAX_SIDE, 3 * CAMERA_MAX_SIDE)
+    masks[:, 100:140, 200:260] = 1.0
+    small = rule_size_masks(masks)
+    assert small.shape == (4, round(2 * CAMERA_MAX_SIDE / 3), CAMERA_MAX_SIDE)
+    assert float(small.sum(dim=(1, 2))[0]) == pytest.approx(40 * 60 / 9, rel=0.15)  # the area
+    assert rule_size_masks(masks[:, :CAMERA_MAX_SIDE, :CAMERA_MAX_SIDE]) is None  # small enough
+    masks[2] = 0.0
+    masks[2, 10, 10] = 1.0  # a pixel: gone at a third of the size
+    assert rule_size_masks(masks) is None
