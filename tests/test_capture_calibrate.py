@@ -16,6 +16,7 @@ from reconphys.capture.calibrate import (
     BELOW_DEPTH_SHARE,
     DROP_HEIGHT_ERROR_FLOOR_M,
     estimate_camera,
+    object_depth,
 )
 from reconphys.capture.masks import read_release
 from reconphys.errors import InputError
@@ -747,6 +748,9 @@ def test_a_larger_copy_of_the_masks_reads_the_same_camera():
     given = estimate_camera(large, 0.03, intrinsics=K)
     assert torch.allclose(given.camera.K.double(), K)
     assert given.distance == pytest.approx(big.distance, rel=1e-6)
+    # the object's depth under a known camera (reconstruct.object_distance) reads them alike
+    depth = object_depth(masks, 0.03, small.camera)
+    assert object_depth(large, 0.03, big.camera) == pytest.approx(depth, rel=1e-9)
 
 
 def test_masks_are_read_at_the_rules_size_unless_the_object_would_vanish():

@@ -547,7 +547,13 @@ def object_depth(
 ) -> float:  # metres: the camera z of the object's centre in frame 0
     """How far the object is, from its free fall seen by a known camera: gravity's direction in
     the camera frame is the camera's, its size is known, so the fall's pixels give the depth
-    (module doc, 1, with the pitch known). InputError when the video shows no free fall."""
+    (module doc, 1, with the pitch known), at the rules' size as :func:`estimate_camera` reads
+    it (:func:`rule_size_masks`). InputError when the video shows no free fall."""
+    small = rule_size_masks(masks)
+    if small is not None:
+        factor = small.shape[2] / masks.shape[2]
+        resized = camera.resized(small.shape[2], small.shape[1])
+        return object_depth(small, frame_dt, resized, max(FALL_FIT_PX, fit_px * factor))
     track = mask_track(masks)
     count = _free_fall_frames(track, frame_dt, fit_px)
     rotation = camera.world_to_cam[:3, :3].double().numpy()
