@@ -551,9 +551,8 @@ def object_depth(
     it (:func:`rule_size_masks`). InputError when the video shows no free fall."""
     small = rule_size_masks(masks)
     if small is not None:
-        factor = small.shape[2] / masks.shape[2]
         resized = camera.resized(small.shape[2], small.shape[1])
-        return object_depth(small, frame_dt, resized, max(FALL_FIT_PX, fit_px * factor))
+        return object_depth(small, frame_dt, resized, _rule_size_fit_px(fit_px, masks, small))
     track = mask_track(masks)
     count = _free_fall_frames(track, frame_dt, fit_px)
     rotation = camera.world_to_cam[:3, :3].double().numpy()
@@ -610,6 +609,12 @@ def rule_size_masks(masks: Tensor, max_side: int = CAMERA_MAX_SIDE) -> Tensor | 
     return small if bool(small.flatten(1).any(1).all()) else None
 
 
+def _rule_size_fit_px(fit_px: float, masks: Tensor, small: Tensor) -> float:
+    """The masks' pixel error ``fit_px`` at the size of ``small`` (rule_size_masks): it shrinks
+    with them, not below the exact masks' FALL_FIT_PX."""
+    return max(FALL_FIT_PX, fit_px * small.shape[2] / masks.shape[2])
+
+
 def estimate_camera(
     masks: Tensor,  # [T, H, W] in {0, 1}, every frame non-empty
     frame_dt: float,  # seconds between frames
@@ -624,25 +629,20 @@ def estimate_camera(
     doc), read from the masks area-averaged to CAMERA_MAX_SIDE (:func:`rule_size_masks`; their
     pixel error ``fit_px`` shrinks with them, not below FALL_FIT_PX) and brought back to their
     size: the same camera, its K in the masks' pixels."""
+    height_px, width_px = masks.shape[1:3]
     small = rule_size_masks(masks)
-    if small is not None:
-        height_px, width_px = masks.shape[1:3]
-        scale = torch.tensor(
-            [small.shape[2] / width_px, small.shape[1] / height_px, 1.0], dtype=torch.float64
-        )[:, None]  # [3, 1]: K's rows to the smaller masks' pixels
+    if small is not None:  # read there, the camera brought back (CameraSpec.resized both ways)
+        given = None
+        if intrinsics is not None:
+            known = CameraSpec(
+                intrinsics.double(), torch.eye(4, dtype=torch.float64), width_px, height_px
+            )
+            given = known.resized(small.shape[2], small.shape[1]).K
+        fit = _rule_size_fit_px(fit_px, masks, small)
+        read = estimate_camera(small, frame_dt, fov_deg, fit, ground_from_touch, touch, given)
         factor = small.shape[2] / width_px
-        read = estimate_camera(
-            small,
-            frame_dt,
-            fov_deg,
-            max(FALL_FIT_PX, fit_px * factor),
-            ground_from_touch,
-            touch,
-            None if intrinsics is None else intrinsics.double() * scale,
-        )
         camera = read.camera.resized(width_px, height_px)
         return replace(read, camera=camera, residual_px=read.residual_px / factor)
-    height_px, width_px = masks.shape[1:3]
     if intrinsics is None:
         fov, fov_from = recording_fov(fov_deg, None, width_px, height_px)
         K = intrinsics_from_fov(fov, width_px, height_px, dtype=torch.float64)
