@@ -20,6 +20,10 @@ taken as a user's recording (frames only):
   object's true lowest point in frame 0, at its pixel and the depth the estimate gives the
   object), metres: what decides when the simulated object lands.
 
+Rows ``segmenter_default_fov_drop_height_given_x{F}`` give the estimate the true drop height
+times F (``--drop-height-factors``, default 1: a user who measured it; 0.5 or 2: one who did not),
+as ``predict --drop-height`` does, and count its refusals and warnings.
+
 ``--aspect W:H`` cuts each clip to that shape about its centre first (a phone's 9:16 portrait
 frame from the data's square one; the true camera's principal point follows) and adds the rule
 before 2026-11-28 as a row: 45° vertical whatever the shape (``segmenter_45_vertical``).
@@ -69,10 +73,14 @@ def centre_cut(frames, truth, K, aspect: tuple[int, int] | None):
     return frames[:, rows, cols], truth[:, rows, cols], K
 
 
-def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True, K=None) -> dict:
+def camera_errors(
+    masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True, K=None, drop_factor=None
+) -> dict:
     anchors = item["anchors"].double()  # [T, N_A, 3]
-    estimate = estimate_camera(masks, float(meta["frame_dt"]), fov_deg, fit_px, touch)
     lowest = anchors[0][anchors[0][:, 2].argmin()]  # frame 0's lowest point: the drop height
+    given = None if drop_factor is None else drop_factor * float(lowest[2])  # --drop-height
+    frame_dt = float(meta["frame_dt"])
+    estimate = estimate_camera(masks, frame_dt, fov_deg, fit_px, touch, drop_height=given)
     K = item["K"][0] if K is None else K
     errors = camera_read_errors(estimate, K, item["world_to_cam"][0], anchors[0].mean(0), lowest)
     return {
@@ -82,6 +90,7 @@ def camera_errors(masks, item, meta, fov_deg, fit_px=FALL_FIT_PX, touch=True, K=
         "drop_height_m": estimate.drop_height,  # frame 0's lowest point above the ground read
         "drop_height_m_10_90": list(estimate.drop_height_10_90),
         "drop_height_true_m": float(lowest[2]),
+        "drop_height_warned": estimate.drop_height_warning is not None,
     }
 
 
@@ -101,7 +110,13 @@ def main() -> None:
         "--max-side", type=int, default=MAX_SIDE, help="segment at most this size, px"
     )
     parser.add_argument("--aspect", default=None, help="W:H: cut each clip to it (module doc)")
+    parser.add_argument(
+        "--drop-height-factors",
+        default="1",
+        help="comma-separated: rows with the true drop height times each given (--drop-height)",
+    )
     args = parser.parse_args()
+    factors = [float(x) for x in args.drop_height_factors.split(",") if x]
     aspect = tuple(int(v) for v in args.aspect.split(":")) if args.aspect else None
     torch.set_num_threads(2)
     dataset = DropDataset(args.data, split=args.split, views=[0])
@@ -141,6 +156,12 @@ def main() -> None:
                 row[name] = camera_errors(used, item, meta, fov, fit_px, touch, K)
             except InputError as e:
                 row[name] = {"refused": str(e)}
+        for factor in factors:  # a user who measured the drop height (× factor: wrongly)
+            name = f"segmenter_default_fov_drop_height_given_x{factor:g}"
+            try:
+                row[name] = camera_errors(masks, item, meta, None, segmenter_px, True, K, factor)
+            except InputError as e:
+                row[name] = {"refused": str(e), "field": e.field}
         rows.append(row)
         print(
             f"{row['id']}: IoU {row['iou_segmenter']:.3f} (median {row['iou_median']:.3f}) "
@@ -182,6 +203,15 @@ def main() -> None:
             for lo, hi in [g["size_factor_10_90"]]
         ]
         drop = [g["drop_height_m_10_90"] + [g["drop_height_true_m"]] for g in good]
+        if "_given_" in name:  # the interval is the value given; what the checks made of it
+            checked = sum(r[name].get("field") == "--drop-height" for r in rows)
+            print(
+                f"{name}: |ground error| mean {100 * ground.mean():.1f} cm median "
+                f"{100 * np.median(ground):.1f} cm ≤ 2 cm: {(ground <= 0.02).mean():.0%}; "
+                f"refused {refused} (by the drop height's check {checked}); warned of "
+                f"{sum(g['drop_height_warned'] for g in good)} of {len(good)} answered"
+            )
+            continue
         print(
             f"{name}: |scale error| mean {scale.mean():.3f} median {np.median(scale):.3f} "
             f"≤ 10 %: {(scale <= 0.1).mean():.0%}; |ground error| mean {100 * ground.mean():.1f} "

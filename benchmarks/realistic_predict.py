@@ -10,7 +10,9 @@ For view 0 of the first N test samples of a realistic dataset, the sample is wri
 - `mp4_only`: the mp4 alone (camera estimated from the video),
 - `masks_dir` (not in the default set): the mp4 + the true masks as `--masks DIR` (a
   segmentation tool's masks at their best; camera estimated from the video, its ground from
-  the first touch).
+  the first touch),
+- `mp4_drop_height` (not in the default set): the mp4 alone with the true drop height given
+  (`--drop-height`: frame 0's lowest point above the ground, as a user with a tape measure).
 
 Printed: MAE of log k/m, log d/m and friction against the truth, beside the trivial predictor
 (the attribute ranges' midpoints, the medians of a uniform training distribution), their ratios,
@@ -60,7 +62,7 @@ from reconphys.threads import set_cpu_threads
 
 FUTURE = slice(20, 30)  # evaluate's future window (frames 20–29)
 
-CONFIGS = ("true_geometry", "camera_file", "mp4_only")  # the default set; also: masks_dir
+CONFIGS = ("true_geometry", "camera_file", "mp4_only")  # the default set; also: module doc
 
 
 def observables(attributes: dict) -> np.ndarray:  # [3] log k/m, log d/m, friction
@@ -113,7 +115,13 @@ def main() -> None:
             target = item["frames"][0] * masks[..., None]
 
             def future_psnr(asset, observation, masks=masks, target=target) -> float:
-                frames = simulate_and_render(asset, observation, masks.shape[0])
+                frames = simulate_and_render(  # over the recording's plate, as the preview
+                    asset,
+                    observation.unmasked.cpu(),
+                    observation.masks.cpu(),
+                    observation.camera,
+                    masks.shape[0],
+                )
                 if frames.shape != target.shape:
                     raise ValueError(f"rendered {list(frames.shape)}, recording {target.shape}")
                 scores = psnr(frames[FUTURE], target[FUTURE], mask=masks[FUTURE])
@@ -138,8 +146,10 @@ def main() -> None:
             row = {"id": meta["id"], "truth": truth.tolist()}
             for config in configs:
                 kwargs = {}
-                if config not in ("mp4_only", "masks_dir"):
+                if not config.startswith("mp4_") and config != "masks_dir":
                     kwargs["camera"] = bundle / "camera.json"
+                if config == "mp4_drop_height":
+                    kwargs["drop_height"] = float(item["anchors"][0][:, 2].min())
                 if config == "masks_dir":
                     kwargs["masks"] = bundle / "masks"
                 if config == "true_geometry":

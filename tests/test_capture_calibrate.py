@@ -511,6 +511,39 @@ def test_the_drop_height_is_read_with_an_interval_that_holds_it():
     assert estimate_camera(low_drop, 0.03, fov_deg=45.0).drop_height_10_90[0] == 0.0
 
 
+def test_a_drop_height_given_puts_the_ground_there_and_keeps_the_videos_read_beside():
+    """``--drop-height``: the ground goes that far below frame 0's lowest point (seen through the
+    estimated camera: the frame-0 bottom moves up by exactly the difference to the read), the
+    fall's scale and pitch unchanged, the video's own read kept beside; a value outside the
+    read's 10–90 % interval is kept with a warning; one shorter than the free fall the video
+    shows is refused; the larger copy of the masks reads it alike."""
+    radius, drop = 0.1, 0.45
+    masks, w2c, centres = ball_masks(15.0, 2.0, drop, radius, braking_g=5.0)
+    read = estimate_camera(masks, 0.03, fov_deg=45.0)
+    given = estimate_camera(masks, 0.03, fov_deg=45.0, drop_height=0.40)
+    assert given.drop_height == pytest.approx(0.40, abs=1e-9)
+    assert given.drop_height_10_90 == (given.drop_height, given.drop_height)
+    for name in ("distance", "pitch_deg", "scale_spread", "contact_s"):
+        assert getattr(given, name) == pytest.approx(getattr(read, name), rel=1e-9), name
+    assert given.drop_height_read == pytest.approx(read.drop_height, rel=1e-9)
+    moved = _frame0_bottom_height(given, w2c, centres, radius)
+    assert moved - _frame0_bottom_height(read, w2c, centres, radius) == pytest.approx(
+        0.40 - read.drop_height, abs=1e-9
+    )
+    written = given.to_json()
+    assert "--drop-height 0.4 m" in written["ground_from"] and written["drop_height_m"] == 0.4
+    assert written["drop_height_read_m"] == round(read.drop_height, 4)
+    assert "drop_height_warning" not in written and "drop_height_read_m" not in read.to_json()
+    far = estimate_camera(masks, 0.03, fov_deg=45.0, drop_height=0.9)
+    assert "not the 0.90 m given" in far.to_json()["drop_height_warning"]
+    with pytest.raises(InputError, match=r"falls freely \d+ cm in the video") as refused:
+        estimate_camera(masks, 0.03, fov_deg=45.0, drop_height=0.2)
+    assert refused.value.field == "--drop-height"
+    large = masks.repeat_interleave(2, 1).repeat_interleave(2, 2)  # read at the rules' size
+    twice = estimate_camera(large, 0.03, fov_deg=45.0, drop_height=0.40)
+    assert twice.drop_height == pytest.approx(0.40, abs=1e-9) and twice.drop_height_given
+
+
 def _held_disc(
     release: float,
     held_row: float = 12.0,
@@ -724,6 +757,38 @@ def test_the_segmenters_masks_are_read_to_its_own_pixel(tmp_path):
     assert observation.camera_estimate["fall_frames"] == 9
     with pytest.raises(InputError, match="falls freely in 3 frame"):
         read({})  # the masks' own pixel: the rule before
+
+
+def test_a_drop_height_is_refused_beside_a_camera_file_that_places_the_ground(tmp_path):
+    """A camera file with a pose sets the ground (its ground_height): ``--drop-height`` beside it
+    is refused, naming the option; with a file of K alone (the pose read from the video) the
+    drop height given is where the estimate puts its ground."""
+    import json
+
+    from reconphys.capture.observation import load_observation
+    from reconphys.render.video import write_mp4
+
+    masks, w2c, _ = ball_masks(15.0, 2.0, 0.45, 0.1, braking_g=5.0)
+    floor = np.random.default_rng(0).uniform(60, 200, (1, 96, 96, 3)).astype(np.uint8)
+    write_mp4(tmp_path / "drop.mp4", np.repeat(floor, 30, 0), fps=1 / 0.03)
+    K = intrinsics_from_fov(45.0, 96, 96, dtype=torch.float64).tolist()
+    posed, bare = tmp_path / "posed.json", tmp_path / "bare.json"
+    posed.write_text(json.dumps({"K": K, "world_to_cam": w2c.tolist(), "size": [96, 96]}))
+    bare.write_text(json.dumps({"K": K, "size": [96, 96]}))
+
+    def read(camera, drop_height):
+        return load_observation(
+            tmp_path / "drop.mp4",
+            camera=camera,
+            drop_height=drop_height,
+            segment=lambda rgb: (masks.clone(), {"segmented_size": [96, 96]}),
+        )
+
+    with pytest.raises(InputError, match="place the ground already") as refused:
+        read(posed, 0.4)
+    assert refused.value.field == "--drop-height"
+    estimate = read(bare, 0.4).camera_estimate
+    assert estimate["drop_height_m"] == 0.4 and "--drop-height" in estimate["ground_from"]
 
 
 def test_a_larger_copy_of_the_masks_reads_the_same_camera():

@@ -702,6 +702,21 @@ def test_predict_reads_a_realistic_mp4_alone_masks_and_camera_from_the_video(
     )
     assert result.exit_code == 2 and "--touch" in result.output and "soft, rigid" in result.output
     assert not (tmp_path / "a4").exists()
+    # a drop height measured by the user: the ground put there, the video's read printed beside
+    given = round(estimate["drop_height_m"] + 0.01, 2)
+    command = ["predict", str(video), "--out", str(tmp_path / "a5"), "--drop-height", str(given)]
+    result = runner.invoke(app, [*command, *flags])
+    assert result.exit_code == 0, result.output
+    estimate = json.loads((tmp_path / "a5" / "prediction.json").read_text())["input"][
+        "camera_estimate"
+    ]
+    assert estimate["drop_height_m"] == given and estimate["drop_height_m_10_90"] == [given] * 2
+    assert f"the video reads {estimate['drop_height_read_m']:.2f} m" in result.output
+    for bad in ("0", "-0.3", "nan"):
+        command = ["predict", str(video), "--out", str(tmp_path / "a6"), "--drop-height", bad]
+        result = runner.invoke(app, command)
+        assert result.exit_code == 2 and "--drop-height" in result.output
+    assert not (tmp_path / "a6").exists()
 
 
 def test_commands_that_read_object_on_black_refuse_a_realistic_dataset(tmp_path):

@@ -250,6 +250,7 @@ def test_a_dataset_sample_takes_masks_and_refuses_recording_options(dataset, sam
     for option in (
         *({"camera": "c.json"}, {"fps": 30.0}, {"fov_deg": 50.0}, {"background": "b"}),
         {"touch": "rigid"},
+        {"drop_height": 0.4},
     ):
         with pytest.raises(InputError, match="is for recordings, not dataset samples"):
             load_input(dataset, sample=sample_id, **option)

@@ -30,6 +30,10 @@ freely for a few frames before it lands.
    by about its half-depth (taken as the mask's half-width). A ground either way must lie
    below the object's lowest point in frame 0, which is in the air (within
    :data:`CLEARANCE_SLACK_PX`): a touch whose ground does not is set aside for the rest's.
+   A user who knows the drop height (frame 0's lowest point above the ground: a tape measure)
+   gives it instead (``drop_height``, ``--drop-height``): the ground is put there, the video's
+   own read kept beside it, with a warning where the given value lies outside its 2.5–97.5 %
+   interval; refused where the video shows the object's centre falling freely through it.
 3. **The world frame** follows the dataset's conventions (z up, ground z = 0): the camera on the
    +x side looking towards −x, pitched down by θ, and the object's frame-0 centre above the origin.
 
@@ -121,6 +125,10 @@ CLEARANCE_SLACK_PX = 1.0
 # of 2–8 cm whose intervals held the truth on 80 % (docs/usage.md "How well the drop height is
 # known"); a pixel-based floor held less on another engine's drops at the same width
 DROP_HEIGHT_ERROR_FLOOR_M = 0.06
+# A drop height given (--drop-height) outside the video's own read by more than this many
+# standard deviations (its 2.5–97.5 % interval) is warned of: the 10–90 % interval would warn
+# one correct value in five (docs/usage.md#a-drop-height-you-measured)
+DROP_HEIGHT_WARN_Z = NormalDist().inv_cdf(0.975)
 # The masks the camera is read from, area-averaged to at most this many pixels a side first: the
 # rules' tolerances and thresholds (FALL_FIT_PX, LANDED_PIXELS, CONTACT_MIN_PX, ...) were chosen
 # on 96–128-px clips, and read a larger clip's fall unlike its own at 128 px. On the two
@@ -152,18 +160,40 @@ class CameraEstimate:
     scale_spread: float = 0.0  # the size's (and distance's) error, log, one standard deviation
     drop_height: float = 0.0  # frame 0's lowest silhouette point above the ground read, metres
     fov_from: str = "given (--fov)"  # where fov_deg came from (lens.recording_fov)
+    drop_height_given: bool = False  # drop_height is the user's (--drop-height), not read
+    # with a drop height given: the video's own read of it beside (None: not read, refused)
+    drop_height_read: float | None = None
 
-    @property
-    def drop_height_spread(self) -> float:
-        """The drop height's error, metres, one standard deviation: the size's share of it (a
-        length read from the fall) beside :data:`DROP_HEIGHT_ERROR_FLOOR_M`."""
-        return math.hypot(self.drop_height * self.scale_spread, DROP_HEIGHT_ERROR_FLOOR_M)
+    def _read_interval(self, height: float, z: float = Z_10_90) -> tuple[float, float]:
+        """A drop height read from the video, metres: its interval of ``z`` standard deviations
+        either way (10–90 % by default; not below the ground), one deviation being the size's
+        relative error times it beside :data:`DROP_HEIGHT_ERROR_FLOOR_M`."""
+        half = z * math.hypot(height * self.scale_spread, DROP_HEIGHT_ERROR_FLOOR_M)
+        return max(height - half, 0.0), max(height + half, 0.0)
 
     @property
     def drop_height_10_90(self) -> tuple[float, float]:
-        """The true drop height, metres: 10–90 % interval (not below the ground)."""
-        half = Z_10_90 * self.drop_height_spread
-        return max(self.drop_height - half, 0.0), max(self.drop_height + half, 0.0)
+        """The true drop height, metres: 10–90 % interval (not below the ground); a given one
+        is taken as it is."""
+        if self.drop_height_given:
+            return self.drop_height, self.drop_height
+        return self._read_interval(self.drop_height)
+
+    @property
+    def drop_height_warning(self) -> str | None:
+        """Where a given drop height lies outside the 2.5–97.5 % interval of the video's own read
+        of it (:data:`DROP_HEIGHT_WARN_Z`): a line that says so (the value is kept: the read is
+        the less sure of the two)."""
+        if not self.drop_height_given or self.drop_height_read is None:
+            return None
+        low, high = self._read_interval(self.drop_height_read, DROP_HEIGHT_WARN_Z)
+        if low <= self.drop_height <= high:
+            return None
+        return (
+            f"the video reads the drop height {self.drop_height_read:.2f} m ({low:.2f}–"
+            f"{high:.2f} m, 2.5–97.5 %), not the {self.drop_height:.2f} m given: check "
+            "--drop-height (frame 0's lowest point above the ground, metres)"
+        )
 
     @property
     def size_factor_10_90(self) -> tuple[float, float]:
@@ -174,6 +204,8 @@ class CameraEstimate:
     @property
     def ground_from(self) -> str:
         """What the ground was read from, in words (prediction.json's ``ground_from``)."""
+        if self.drop_height_given:
+            return f"the drop height given (--drop-height {self.drop_height:g} m)"
         if self.contact_s is not None:
             return f"the first touch of the ground ({self.touch}), {self.contact_s:.3f} s"
         if self.contact_set_aside_s is not None:
@@ -205,7 +237,19 @@ class CameraEstimate:
             if self.contact_set_aside_s is None
             else round(self.contact_set_aside_s, 4),
             "touch": self.touch,
+        } | (self._given_json() if self.drop_height_given else {})
+
+    def _given_json(self) -> dict:
+        """With a drop height given: the video's own read of it, and a warning where they part."""
+        read = self.drop_height_read
+        written = {
+            "drop_height_read_m": None if read is None else round(read, 4),
+            "drop_height_read_m_10_90": None
+            if read is None
+            else [round(x, 4) for x in self._read_interval(read)],
         }
+        warning = self.drop_height_warning
+        return written | ({"drop_height_warning": warning} if warning else {})
 
 
 @dataclass
@@ -595,6 +639,42 @@ def _fit_to_touch(
     return count, fit, contact
 
 
+def _given_ground(
+    drop_height: float,  # metres: frame 0's lowest point above the ground (--drop-height)
+    params: np.ndarray,  # the fall's fit (_fit_fall)
+    positions,  # the fall's path: positions(params, t [F]) → [F, 3] camera frame, metres
+    down: np.ndarray,  # [3] world down in the camera frame
+    below: float,  # metres: frame 0's extent below its centre
+    count: int,  # frames of free fall
+    frame_dt: float,
+    slack: float,  # metres: the masks' rim at the object's depth
+) -> float:
+    """The camera's height above a ground ``drop_height`` below frame 0's lowest point. Refused
+    (InputError) where the camera would lie below it, or where the object's centre falls freely
+    further than its frame-0 height over that ground (``drop_height`` + ``below``) in the video:
+    a centre never passes through the ground, whether the object turns or the fall's frames run
+    a frame past a soft landing."""
+    times = np.arange(count) * frame_dt
+    start = float(params[:3] @ down)
+    fallen = float((positions(params, times) @ down).max()) - start  # metres, down
+    if fallen > drop_height + below + slack:
+        raise InputError(
+            f"the object's centre falls freely {fallen * 100:.0f} cm in the video (frames 0–"
+            f"{count - 1}), through a ground {drop_height * 100:.0f} cm below its lowest point "
+            f"(and {(drop_height + below) * 100:.0f} cm below its centre) in frame 0: check the "
+            "value (metres), or leave it out to read the ground from the video",
+            field="--drop-height",
+        )
+    camera_height = start + below + drop_height
+    if not camera_height > 0:
+        raise InputError(
+            f"{drop_height:g} m below the object puts the camera {-camera_height:.2f} m under "
+            "the ground: check the value (metres)",
+            field="--drop-height",
+        )
+    return camera_height
+
+
 def rule_size_masks(masks: Tensor, max_side: int = CAMERA_MAX_SIDE) -> Tensor | None:
     """Masks [T, H, W] area-averaged to at most ``max_side`` px a side (≥ half covered: object),
     the size the camera's rules were chosen at; None when they are that small already or when
@@ -624,11 +704,17 @@ def estimate_camera(
     touch: str = "soft",  # TOUCHES: how the object meets the ground (contact_time)
     intrinsics: Tensor | None = None,  # [3, 3] pixels at the masks' size: K known (a camera
     # file without a pose); then fov_deg is not used
+    drop_height: float | None = None,  # metres: frame 0's lowest point above the ground, known
+    # (--drop-height); the ground is put there, the video's own read kept beside it
 ) -> CameraEstimate:
     """The camera (intrinsics from ``fov_deg`` or given, pose and ground from the video; module
     doc), read from the masks area-averaged to CAMERA_MAX_SIDE (:func:`rule_size_masks`; their
     pixel error ``fit_px`` shrinks with them, not below FALL_FIT_PX) and brought back to their
-    size: the same camera, its K in the masks' pixels."""
+    size: the same camera, its K in the masks' pixels.
+
+    With ``drop_height`` given the ground lies that far below frame 0's lowest silhouette point
+    (the fall still gives the scale and the pitch; :func:`_given_ground` says when it is
+    refused)."""
     height_px, width_px = masks.shape[1:3]
     small = rule_size_masks(masks)
     if small is not None:  # read there, the camera brought back (CameraSpec.resized both ways)
@@ -639,7 +725,9 @@ def estimate_camera(
             )
             given = known.resized(small.shape[2], small.shape[1]).K
         fit = _rule_size_fit_px(fit_px, masks, small)
-        read = estimate_camera(small, frame_dt, fov_deg, fit, ground_from_touch, touch, given)
+        read = estimate_camera(
+            small, frame_dt, fov_deg, fit, ground_from_touch, touch, given, drop_height
+        )
         factor = small.shape[2] / width_px
         camera = read.camera.resized(width_px, height_px)
         return replace(read, camera=camera, residual_px=read.residual_px / factor)
@@ -699,25 +787,45 @@ def estimate_camera(
         bottom = np.array([(track.centroid[-1, 0] - cx) / fx, (track.bottom[-1] - cy) / fy, 1.0])
         return float(near * bottom @ down)
 
-    contact = touch_s if ground_from_touch else None
-    set_aside = None  # a touch whose ground lies above the object in frame 0
     slack = CLEARANCE_SLACK_PX * mask_pixel(fit_px) * metres_per_px
-    if contact is not None and not clearance(from_touch(contact)) > -slack:
-        contact, set_aside = None, contact
-    camera_height = from_touch(contact) if contact is not None else from_rest()
-    if not camera_height > 0:
-        raise InputError(
-            f"the ground read from the video is above the camera ({camera_height:.2f} m): the "
-            "fall or the rest position is not read well; give the camera with --camera FILE",
-            source="camera from the video",
-        )
-    if not clearance(camera_height) > -slack:
-        raise InputError(
-            f"the ground read from the video is {-clearance(camera_height) * 100:.1f} cm above "
-            "the falling object's lowest point in frame 0 (from where it "
-            f"{'rests' if set_aside is None else 'rests and where it first touches'}): the "
-            "fall, the touch or the rest is not read well; give the camera with --camera FILE",
-            source="camera from the video",
+
+    def read_ground() -> tuple[float, float | None, float | None]:
+        """The camera's height read from the video (module doc, 2), the touch it was read from
+        (None: the rest) and a touch set aside (its ground above the object in frame 0)."""
+        contact = touch_s if ground_from_touch else None
+        set_aside = None
+        if contact is not None and not clearance(from_touch(contact)) > -slack:
+            contact, set_aside = None, contact
+        camera_height = from_touch(contact) if contact is not None else from_rest()
+        if not camera_height > 0:
+            raise InputError(
+                f"the ground read from the video is above the camera ({camera_height:.2f} m): "
+                "the fall or the rest position is not read well; give the camera with --camera "
+                "FILE",
+                source="camera from the video",
+            )
+        if not clearance(camera_height) > -slack:
+            raise InputError(
+                f"the ground read from the video is {-clearance(camera_height) * 100:.1f} cm "
+                "above the falling object's lowest point in frame 0 (from where it "
+                f"{'rests' if set_aside is None else 'rests and where it first touches'}): the "
+                "fall, the touch or the rest is not read well; give the camera with --camera "
+                "FILE",
+                source="camera from the video",
+            )
+        return camera_height, contact, set_aside
+
+    drop_height_read = None
+    if drop_height is None:
+        camera_height, contact, set_aside = read_ground()
+    else:
+        try:  # the video's own read, kept beside the one given
+            read_height, contact, set_aside = read_ground()
+            drop_height_read = clearance(read_height)
+        except InputError:
+            contact, set_aside = None, None
+        camera_height = _given_ground(
+            drop_height, params, positions, down, below, count, frame_dt, slack
         )
     world_to_cam = _world_to_cam(pitch, camera_height)
     # shift the world so the object's frame-0 centre is above the origin (dataset convention)
@@ -741,6 +849,8 @@ def estimate_camera(
         touch=touch,
         scale_spread=math.hypot(SCALE_ERROR_FACTOR * depth_error, SCALE_ERROR_FLOOR),
         drop_height=clearance(camera_height),
+        drop_height_given=drop_height is not None,
+        drop_height_read=drop_height_read,
     )
     low, high = estimate.size_factor_10_90
     if not high <= MAX_SIZE_FACTOR:

@@ -462,6 +462,8 @@ def load_observation(
     camera: str | os.PathLike | None = None,  # camera JSON (.camera), "dataset", None: estimate
     fov_deg: float | None = None,  # vertical field of view for the estimate (None: default)
     touch: str = "soft",  # how the object meets the ground, for the estimate (calibrate.TOUCHES)
+    drop_height: float | None = None,  # metres: frame 0's lowest point above the ground, known
+    # (the estimate puts its ground there); refused with a camera file that has a pose
     fps: float | None = None,  # frame rate of a frame folder / override of the file's
     frame_dt: float = 0.03,
     start: float | str = 0.0,  # seconds into the recording: the release (frame 0); before it
@@ -518,9 +520,21 @@ def load_observation(
             intrinsics = (
                 known.resized(filmed_width, filmed_height).cropped(margin, margin, width, height).K
             )
+    if drop_height is not None and camera is not None and intrinsics is None:
+        raise InputError(
+            "the camera file's pose and ground_height place the ground already: give "
+            "--drop-height with a camera file of K alone, or without --camera",
+            field="--drop-height",
+        )
     if camera is None or intrinsics is not None:  # from the video: gravity's scale, the ground
         found = estimate_camera(
-            chosen, frame_dt, clip.read_fov, fit_px, touch=touch, intrinsics=intrinsics
+            chosen,
+            frame_dt,
+            clip.read_fov,
+            fit_px,
+            touch=touch,
+            intrinsics=intrinsics,
+            drop_height=drop_height,
         )
         if intrinsics is None:
             found.fov_from = clip.fov_from + (" (narrowed to the steadied crop)" if margin else "")

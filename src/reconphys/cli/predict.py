@@ -63,6 +63,13 @@ def predict_command(
         "default: it squashes as it lands) or 'rigid' (it stops or bounces at once: a hard toy, "
         "a block). 'soft' reads a rigid object's ground ~7 cm high.",
     ),
+    drop_height: float = typer.Option(
+        None,
+        help="Metres from the ground up to the object's lowest point at the release (frame 0), "
+        "if you measured it: the ground is put there instead of read from the video (the "
+        "video's read is kept beside it in prediction.json, with a warning where they part). "
+        "Not with a camera file that has a pose.",
+    ),
     fps: float = typer.Option(None, help="Frame rate of a frame folder (or to override)."),
     start: str = typer.Option(
         "0",
@@ -138,6 +145,8 @@ def predict_command(
         raise InputError(
             f"must be a vertical field of view in [1, 170] degrees, got {fov}", "--fov"
         )
+    if drop_height is not None and not (math.isfinite(drop_height) and 0 < drop_height <= 10):
+        raise InputError(f"must be in (0, 10] metres, got {drop_height}", field="--drop-height")
     if preview_frames < 0:
         raise InputError(f"must be ≥ 0, got {preview_frames}", field="--preview-frames")
     torch_device = resolve_device(device)
@@ -150,6 +159,7 @@ def predict_command(
         camera=camera,
         fov=fov,
         touch=touch,
+        drop_height=drop_height,
         fps=fps,
         start=start,
         end=end,
@@ -193,11 +203,20 @@ def predict_command(
             + ("; give --camera FILE for more" if high > 1.25 else "")
         )
         drop_low, drop_high = estimate["drop_height_m_10_90"]
-        typer.echo(
-            f"ground read from {estimate['ground_from']}: the object starts "
-            f"{estimate['drop_height_m']:.2f} m above it ({drop_low:.2f}–{drop_high:.2f} m, "
-            "10–90 %)"
-        )
+        if "drop_height_read_m" in estimate:  # given (--drop-height)
+            read_drop = estimate["drop_height_read_m"]
+            typer.echo(
+                f"ground from {estimate['ground_from']}; the video reads "
+                + ("none (refused)" if read_drop is None else f"{read_drop:.2f} m")
+            )
+        else:
+            typer.echo(
+                f"ground read from {estimate['ground_from']}: the object starts "
+                f"{estimate['drop_height_m']:.2f} m above it ({drop_low:.2f}–{drop_high:.2f} m, "
+                "10–90 %)"
+            )
+        if estimate.get("drop_height_warning"):
+            typer.echo(f"warning: drop height: {estimate['drop_height_warning']}", err=True)
     masks_warning = read.get("masks_rating", {}).get("warning")
     if masks_warning:
         typer.echo(f"warning: masks: {masks_warning}", err=True)

@@ -249,6 +249,7 @@ def predict(
     fov: float | None = None,
     touch: str | None = None,  # how the object meets the ground, for the camera read from the
     # video: "soft" (None) or "rigid"
+    drop_height: float | None = None,  # metres: frame 0's lowest point above the ground, known
     fps: float | None = None,
     start: float | str = 0.0,  # seconds into a recording, or "auto" (read from the masks)
     end: float | None = None,
@@ -305,6 +306,7 @@ def predict(
         fps=fps,
         fov_deg=fov,
         touch=touch,
+        drop_height=drop_height,
         frame_dt=float(predictor.metadata["input"].get("frame_dt", 0.03)),
         sample=sample,
         view=predictor.view if view is None else view,

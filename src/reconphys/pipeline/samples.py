@@ -100,6 +100,7 @@ def load_input(
     fov_deg: float | None = None,  # vertical field of view when the camera is estimated
     touch: str | None = None,  # how the object meets the ground, when the camera is estimated
     # (calibrate.TOUCHES; None: "soft")
+    drop_height: float | None = None,  # metres: frame 0's lowest point above the ground, known
     sample: str | None = None,  # dataset input: the sample id
     view: int = 0,  # dataset input: the view
     start: float | str = 0.0,  # seconds into a recording: its release (frame 0), or "auto"
@@ -108,8 +109,9 @@ def load_input(
 ) -> tuple[Observation, SampleTruth | None]:
     """INPUT (a video, a frame folder, or a dataset folder with ``sample``) → the observation,
     and the sample's truth for a dataset input (None otherwise). Raises InputError, also for
-    ``background``, ``camera``, ``fps``, ``fov_deg``, ``touch``, ``start`` or ``end`` given
-    with a dataset sample (its camera and frame rate are stored): refused, not dropped."""
+    ``background``, ``camera``, ``fps``, ``fov_deg``, ``touch``, ``drop_height``, ``start`` or
+    ``end`` given with a dataset sample (its camera and frame rate are stored): refused, not
+    dropped."""
     path = Path(input)
     if not path.exists():
         raise InputError("not found", source=str(path))
@@ -121,6 +123,7 @@ def load_input(
             "--fps": fps is not None,
             "--fov": fov_deg is not None,
             "--touch": touch is not None,
+            "--drop-height": drop_height is not None,
         }
         named = [name for name, used in given.items() if used]
         if named:
@@ -141,6 +144,7 @@ def load_input(
         frame_dt=frame_dt,
         fov_deg=fov_deg,
         touch=touch or "soft",
+        drop_height=drop_height,
         start=start,
         end=end,
         segment=segment_frames,
