@@ -213,7 +213,7 @@ def predict_command(
             typer.echo(
                 f"ground read from {estimate['ground_from']}: the object starts "
                 f"{estimate['drop_height_m']:.2f} m above it ({drop_low:.2f}–{drop_high:.2f} m, "
-                "10–90 %)"
+                "10–90 %; measured, --drop-height puts it there)"
             )
         if estimate.get("drop_height_warning"):
             typer.echo(f"warning: drop height: {estimate['drop_height_warning']}", err=True)
