@@ -12,7 +12,9 @@ For view 0 of the first N test samples of a realistic dataset, the sample is wri
   segmentation tool's masks at their best; camera estimated from the video, its ground from
   the first touch),
 - `mp4_drop_height` (not in the default set): the mp4 alone with the true drop height given
-  (`--drop-height`: frame 0's lowest point above the ground, as a user with a tape measure).
+  (`--drop-height`: frame 0's lowest point above the ground, as a user with a tape measure);
+  `mp4_search_ground` (not in the default set): the mp4 alone, the search moving the ground
+  read from the video too (`predict(search_ground=True)`).
 
 Printed: MAE of log k/m, log d/m and friction against the truth, beside the trivial predictor
 (the attribute ranges' midpoints, the medians of a uniform training distribution), their ratios,
@@ -150,6 +152,8 @@ def main() -> None:
                     kwargs["camera"] = bundle / "camera.json"
                 if config == "mp4_drop_height":
                     kwargs["drop_height"] = float(item["anchors"][0][:, 2].min())
+                if config == "mp4_search_ground":
+                    kwargs["search_ground"] = True
                 if config == "masks_dir":
                     kwargs["masks"] = bundle / "masks"
                 if config == "true_geometry":

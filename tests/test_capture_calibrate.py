@@ -534,6 +534,7 @@ def test_a_drop_height_given_puts_the_ground_there_and_keeps_the_videos_read_bes
     assert "--drop-height 0.4 m" in written["ground_from"] and written["drop_height_m"] == 0.4
     assert written["drop_height_read_m"] == round(read.drop_height, 4)
     assert "drop_height_warning" not in written and "drop_height_read_m" not in read.to_json()
+    assert written["drop_height_given"] and not read.to_json()["drop_height_given"]
     far = estimate_camera(masks, 0.03, fov_deg=45.0, drop_height=0.9)
     assert "not the 0.90 m given" in far.to_json()["drop_height_warning"]
     with pytest.raises(InputError, match=r"falls freely \d+ cm in the video") as refused:

@@ -425,3 +425,45 @@ def test_the_motion_search_finds_the_spin_and_the_speed_along_the_view(sample):
     assert (result[:3] - motion[:3]).norm() < 0.2, (motion, result)
     expected = rigid_velocity(truth.asset.x0.double(), result[:3], result[3:])
     assert torch.allclose(found.v0.double(), expected, atol=1e-5)
+
+
+def test_a_lowered_ground_is_the_object_raised_over_it_and_drawn_back(sample):
+    """photometric_errors' ``lowered``: the object simulated Δ higher over the asset's ground and
+    drawn Δ lower scores as the asset whose ground is Δ lower (the physics is the same under a
+    vertical shift: an independent route through the simulator); Δ = 0 is the asset itself."""
+    from reconphys.pipeline.search import photometric_errors
+
+    observation, truth = sample
+    frames, camera = observation.frames[:20], observation.camera
+    candidates = observables(truth.asset.physics)[None].repeat(3, 1)
+    lowered = torch.tensor([0.0, 0.03, -0.02], dtype=torch.float64)
+    shifted = photometric_errors(truth.asset, frames, camera, candidates, lowered=lowered)
+    for delta, error in zip(lowered.tolist(), shifted, strict=True):
+        physics = replace(
+            truth.asset.physics, ground_height=truth.asset.physics.ground_height - delta
+        )
+        moved = replace(truth.asset, physics=physics)
+        alone = photometric_errors(moved, frames, camera, candidates[:1])
+        assert float(error) == pytest.approx(float(alone[0]), rel=1e-4, abs=1e-7)
+    assert float(shifted[1]) != pytest.approx(float(shifted[0]), rel=1e-3)  # it does move
+
+
+def test_the_ground_search_finds_a_ground_read_four_centimetres_high(sample):
+    """A camera read from the video puts the ground a few cm off: the asset's ground 4 cm too
+    high (it lands early) is lowered back by the search to within its finest step; from the
+    true ground it stays within that step."""
+    from reconphys.pipeline.search import GROUND_SPAN_SCALE, SPANS
+
+    observation, truth = sample
+    frames, camera = observation.frames[:20], observation.camera
+    true_ground = truth.asset.physics.ground_height
+    step = SPANS[-1] * GROUND_SPAN_SCALE
+    for offset in (0.04, 0.0):
+        physics = replace(truth.asset.physics, ground_height=true_ground + offset)
+        found, history = search(
+            replace(truth.asset, physics=physics), frames, camera, profiles=False, ground=True
+        )
+        assert history["ground_lowered_m"] == pytest.approx(offset, abs=step)
+        assert found.physics.ground_height == pytest.approx(true_ground, abs=step)
+    _, history = search(truth.asset, frames, camera, profiles=False)
+    assert history["ground_lowered_m"] is None

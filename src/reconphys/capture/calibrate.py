@@ -231,6 +231,7 @@ class CameraEstimate:
             "size_factor_10_90": [round(x, 3) for x in self.size_factor_10_90],
             "drop_height_m": round(self.drop_height, 4),
             "drop_height_m_10_90": [round(x, 4) for x in self.drop_height_10_90],
+            "drop_height_given": self.drop_height_given,  # --drop-height: not read
             "ground_from": self.ground_from,
             "contact_s": None if self.contact_s is None else round(self.contact_s, 4),
             "contact_set_aside_s": None

@@ -203,7 +203,7 @@ def predict_command(
             + ("; give --camera FILE for more" if high > 1.25 else "")
         )
         drop_low, drop_high = estimate["drop_height_m_10_90"]
-        if "drop_height_read_m" in estimate:  # given (--drop-height)
+        if estimate.get("drop_height_given"):  # --drop-height
             read_drop = estimate["drop_height_read_m"]
             typer.echo(
                 f"ground from {estimate['ground_from']}; the video reads "

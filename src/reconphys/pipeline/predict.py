@@ -264,6 +264,8 @@ def predict(
     refine: bool = True,
     refine_steps: int = 0,
     refine_resolution: int = 64,
+    search_ground: bool = False,  # the search moves a ground read from the video too (measured,
+    # not the default: docs/usage.md#searching-the-ground-with-the-physics)
     device: str | torch.device = "cpu",
     progress: bool = False,
 ) -> PredictResult:
@@ -380,6 +382,7 @@ def predict(
         refine=refine,
         refine_steps=refine_steps,
         refine_resolution=refine_resolution,
+        search_ground=search_ground,
         progress=progress,
         truth=truth,
     )
@@ -484,6 +487,7 @@ def predict_observation(
     refine: bool = True,
     refine_steps: int = 0,
     refine_resolution: int = 64,
+    search_ground: bool = False,  # a ground read from the video searched too (see predict)
     progress: bool = False,
     truth: SampleTruth | None = None,
 ) -> PredictResult:
@@ -650,6 +654,10 @@ def predict_observation(
 
         started = time.perf_counter()
         count = predictor.num_frames
+        estimate = observation.camera_estimate  # the ground read from the video, not given
+        ground_read = (
+            estimate is not None and not estimate.get("drop_height_given") and ground == "camera"
+        )
         # the object-centric 3DGS predictor's geometry is not the object's, and a given shape
         # starts from the masks' velocity without spin: wider profiles
         scale = 1.0
@@ -670,6 +678,7 @@ def predict_observation(
             # masks) the fit alone is not to be trusted: times the network's belief
             prior_sigma=sigma if build_new else None,
             rebuilt=build_new,  # τ by the law the belief and the factors were chosen under
+            ground=search_ground and ground_read,
         )
         timings["search"] = time.perf_counter() - started
         intervals = history["intervals"]

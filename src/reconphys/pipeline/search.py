@@ -26,6 +26,11 @@ those of the three observables. ``predict`` does not use it yet (docs/usage.md "
 initial motion with the physics": it recovers the motion from a sample's own asset, not yet the
 physics through predict's rebuilt one).
 
+With ``ground`` the ground's height is one more coordinate (a camera read from the video puts it
+a few cm off): each candidate simulated raised over the asset's ground and drawn back, the asset's
+ground lowered by the best. ``predict(search_ground=True)`` uses it; measured and not the default
+(docs/usage.md "Searching the ground with the physics").
+
 Each round is one batched rollout and one batched render, so a whole search costs seconds at 64 px
 and 256 anchors on two cores (docs/training.md "Refinement by batched search"), against minutes
 for gradient steps, and it needs no gradient through contact, which is what moves friction.
@@ -60,6 +65,10 @@ ACROSS_VIEW_SPANS = (0.7, 0.25)  # the velocity across the view (the masks show 
 MOTION_BOUNDS = torch.tensor([[-3.0, 3.0]] * 3 + [[-8.0, 8.0]] * 3, dtype=torch.float64)
 V_SPAN_SCALE, W_SPAN_SCALE = 0.2, 0.75  # m/s and rad/s per unit of span
 SPAN_SCALES = (1.0, 1.0, FRICTION_SPAN_SCALE) + (V_SPAN_SCALE,) * 3 + (W_SPAN_SCALE,) * 3
+# The ground, when searched (a camera read from the video): lowered by up to GROUND_RANGE_M
+# either way, GROUND_SPAN_SCALE metres per unit of span (±6, ±2.1, ±0.75 cm by SPANS)
+GROUND_RANGE_M = 0.15
+GROUND_SPAN_SCALE = 0.03
 CANDIDATES = 7  # values per observable and round (one batched rollout)
 # The comparison is smaller than the recording (its frames area-averaged down to ``resolution``).
 # Rendering a fine asset (a dense PLY, the paper's 20,000 Gaussians) straight at that size is not
@@ -262,14 +271,21 @@ def photometric_errors(
     silhouettes: Tensor | None = None,  # [T, H, W] the object's masks at the frames' size
     silhouette_weight: float = 0.0,  # × the mean squared error of rendered alpha − mask
     supersample: int = 1,  # rendered this many times larger, then area-averaged (supersampling)
+    lowered: Tensor | None = None,  # [B] metres: each candidate's ground this much lower
 ) -> Tensor:  # [B] mean squared error over frames 1..T−1
     """Simulate the asset with each candidate's observables and score its video. With 9 columns
     the last six are the initial linear (m/s) and angular (rad/s, about the anchors' centroid)
-    velocity of a rigid motion, replacing the asset's v0."""
+    velocity of a rigid motion, replacing the asset's v0. With ``lowered`` each candidate's
+    ground lies that much lower: simulated as the object raised over the asset's ground, then
+    drawn lowered back (the same world, the camera unmoved)."""
     count, physics = len(candidates), asset.physics
     values = attributes_of(candidates, physics.mass)
     steps = frames.shape[0] - 1
     x0 = asset.x0[None].expand(count, -1, -1)
+    if lowered is not None:
+        raise_by = torch.zeros(count, 1, 3, dtype=x0.dtype, device=x0.device)
+        raise_by[:, 0, 2] = lowered.to(x0)
+        x0 = x0 + raise_by
     need = scene_stable_substeps(
         _candidate_model(asset, values), x0, physics.frame_dt, min_substeps
     )
@@ -286,6 +302,8 @@ def photometric_errors(
         state = State(x0[index], v0)
         substeps = max(need[b] for b in group)
         x[index] = rollout(model, state, steps, physics.frame_dt, substeps=substeps).x
+    if lowered is not None:
+        x = x - raise_by[:, None]
     x = x[:, 1:].reshape(count * steps, -1, 3)  # [B·(T−1), N_A, 3]
     g = asset.gaussians
     means = deform_means(g.means, asset.x0[None], x, asset.binding_index, asset.binding_weight)
@@ -424,6 +442,7 @@ def search(
     motion: Tensor | None = None,  # [6] initial (linear m/s, angular rad/s): searched with them
     silhouette_weight: float = 0.0,  # × the silhouettes' squared error, added (needs masks)
     prior_sigma: Tensor | None = None,  # [3] σ of the network's belief, centred on the start
+    ground: bool = False,  # the ground's height searched too (a camera read from the video)
 ) -> tuple[Asset, dict]:
     """Coordinate search from the asset's attributes, then profiles → (asset with the best, history
     dict with ``intervals`` {observable: [lo, hi]} when ``profiles``).
@@ -472,11 +491,21 @@ def search(
             return values
         return torch.cat([values[:, :3], values[:, 3:6] @ rotation, values[:, 6:]], 1)
 
+    span_scales = list(SPAN_SCALES[:3])
+    across = set()  # the motion's coordinates searched only at ACROSS_VIEW_SPANS
     if motion is not None:
         bounds = torch.cat([bounds, MOTION_BOUNDS])
         motion = motion.double()
         start = torch.cat([start, rotation @ motion[:3], motion[3:]])
         names = OBSERVABLES + MOTION_NAMES
+        span_scales, across = list(SPAN_SCALES), {3, 4}
+    physical = len(start)  # the columns photometric_errors reads as observables and motion
+    if ground:  # the last coordinate: metres the ground is lowered by
+        limits = torch.tensor([[-GROUND_RANGE_M, GROUND_RANGE_M]], dtype=torch.float64)
+        bounds = torch.cat([bounds, limits])
+        start = torch.cat([start, torch.zeros(1, dtype=torch.float64)])
+        names = (*names, "ground_lowered_m")
+        span_scales.append(GROUND_SPAN_SCALE)
     current = torch.maximum(torch.minimum(start, bounds[:, 1]), bounds[:, 0])
     half = candidates // 2  # offsets −1..1 with an exact 0 at the centre (the current value)
     grid = torch.arange(-half, half + 1, dtype=torch.float64) / half
@@ -490,8 +519,9 @@ def search(
         trial = current.repeat(len(offsets), 1)
         trial[:, i] = (current[i] + offsets).clamp(*bounds[i].tolist())
         errors = photometric_errors(
-            compared, frames, camera, to_world(trial), silhouettes=silhouettes,
+            compared, frames, camera, to_world(trial[:, :physical]), silhouettes=silhouettes,
             silhouette_weight=silhouette_weight, supersample=supersample,
+            lowered=trial[:, physical] if ground else None,
         )  # fmt: skip
         pick = int(errors.argmin())
         if not errors[pick] < errors[centre_at] * (1.0 - TIE):
@@ -509,8 +539,8 @@ def search(
     def coordinate_search(spans_now, motion_too=True):
         for span in spans_now:
             for i in range(len(current) if motion_too else 3):
-                if i not in (3, 4) or span in ACROSS_VIEW_SPANS:
-                    step(i, grid * span * SPAN_SCALES[i], centre_at=half)
+                if i not in across or span in ACROSS_VIEW_SPANS:
+                    step(i, grid * span * span_scales[i], centre_at=half)
 
     def profile_pass() -> tuple[bool, list[tuple[Tensor, Tensor]]]:
         """One profile per observable (the others at their best); True if one moved the best."""
@@ -562,7 +592,11 @@ def search(
         "method": "coordinate search + profiles (pipeline/search.py)",
         "start": dict(zip(OBSERVABLES, start[:3].tolist(), strict=True)),
         "found": dict(zip(OBSERVABLES, current[:3].tolist(), strict=True)),
-        "initial_motion": None if motion is None else to_world(current[None])[0, 3:].tolist(),
+        "initial_motion": None
+        if motion is None
+        else to_world(current[None, :physical])[0, 3:].tolist(),
+        # metres the ground was lowered by (a camera read from the video), None: not searched
+        "ground_lowered_m": float(current[physical]) if ground else None,
         "error": best_error,
         "lighting_gain": [round(float(g), 4) for g in gain],  # rendered colours × this
         "intervals": intervals,  # 10–90 % of the profile posterior (natural logs of SI ratios)
@@ -576,8 +610,10 @@ def search(
         "window": window,  # (left, top, width, height) of the recording compared; None: all
         "seconds": round(time.perf_counter() - started, 2),
     }
+    if ground:
+        found["ground_height"] = asset.physics.ground_height - float(current[physical])
     result = replace(asset, physics=replace(asset.physics, **found))
     if motion is not None:
-        found_motion = to_world(current[None])[0, 3:].to(asset.x0)
+        found_motion = to_world(current[None, :physical])[0, 3:].to(asset.x0)
         result = replace(result, v0=rigid_velocity(asset.x0, found_motion[:3], found_motion[3:]))
     return result, history
