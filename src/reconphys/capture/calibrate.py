@@ -314,6 +314,20 @@ def fall_frames(track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX) -> 
     return count
 
 
+MAX_DROP_HEIGHT_M = 10.0  # a drop height given above this is a slip of the unit, not a drop
+
+
+def check_drop_height(drop_height: float | None) -> None:
+    """InputError (``--drop-height``) unless None or metres in (0, MAX_DROP_HEIGHT_M]."""
+    if drop_height is not None and not (
+        math.isfinite(drop_height) and 0 < drop_height <= MAX_DROP_HEIGHT_M
+    ):
+        raise InputError(
+            f"must be in (0, {MAX_DROP_HEIGHT_M:g}] metres, got {drop_height}",
+            field="--drop-height",
+        )
+
+
 def check_touch(touch: str) -> None:
     """InputError (``--touch``) unless ``touch`` is one of :data:`TOUCHES`."""
     if touch not in TOUCHES:

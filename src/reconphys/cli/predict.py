@@ -145,8 +145,6 @@ def predict_command(
         raise InputError(
             f"must be a vertical field of view in [1, 170] degrees, got {fov}", "--fov"
         )
-    if drop_height is not None and not (math.isfinite(drop_height) and 0 < drop_height <= 10):
-        raise InputError(f"must be in (0, 10] metres, got {drop_height}", field="--drop-height")
     if preview_frames < 0:
         raise InputError(f"must be ≥ 0, got {preview_frames}", field="--preview-frames")
     torch_device = resolve_device(device)

@@ -35,7 +35,7 @@ from ..assets.asset import Asset
 from ..assets.build import lifted_above, with_gaussians
 from ..assets.gaussians import Gaussians
 from ..capture import Observation
-from ..capture.calibrate import check_touch
+from ..capture.calibrate import check_drop_height, check_touch
 from ..capture.masks import FIRST_FRAMES_AREA_CHANGE, first_frames_area_change
 from ..capture.observation import too_short
 from ..capture.placement import estimate_ground_height, fit_to_mask, placement_scores
@@ -284,6 +284,7 @@ def predict(
             f"expected one of {', '.join(PLACEMENTS)}, got {placement!r}", field="--placement"
         )
     check_touch(touch or "soft")
+    check_drop_height(drop_height)
     if view is not None and not is_dataset(input):
         raise InputError("--view is for dataset samples (a recording has one view)", field="--view")
     if ground not in GROUNDS:
