@@ -261,6 +261,19 @@ def test_a_dataset_sample_takes_masks_and_refuses_recording_options(dataset, sam
     assert not out.exists()
 
 
+def test_the_bundles_truth_holds_the_drop_height_predict_takes(dataset, sample_id, bundle):
+    """`data video`'s truth.json: frame 0's lowest anchor above the ground (z = 0), metres, the
+    value a user gives `predict --drop-height`; the sample's attributes beside it."""
+    from reconphys.data import DropDataset
+
+    truth = json.loads((bundle / "truth.json").read_text())
+    stored = DropDataset(dataset, views=[0], verify=False)
+    index = stored.index_of(sample_id)
+    lowest = float(stored[index]["anchors"][0][:, 2].min())
+    assert truth["drop_height_m"] == pytest.approx(lowest, abs=1e-4) and lowest > 0
+    assert truth["stiffness"] == stored.meta(index)["attributes"]["stiffness"]
+
+
 def test_a_recording_refuses_a_dataset_samples_view(bundle, tmp_path):
     result, out = _predict([bundle / "video.mp4", "--view", "1"], tmp_path)
     assert result.exit_code != 0 and "--view is for dataset samples" in result.output
