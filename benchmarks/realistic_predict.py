@@ -151,7 +151,7 @@ def main() -> None:
                 if not config.startswith("mp4_") and config != "masks_dir":
                     kwargs["camera"] = bundle / "camera.json"
                 if config == "mp4_drop_height":
-                    kwargs["drop_height"] = float(item["anchors"][0][:, 2].min())
+                    kwargs["drop_height"] = meta["initial_state"]["drop_height"]
                 if config == "mp4_search_ground":
                     kwargs["search_ground"] = True
                 if config == "masks_dir":

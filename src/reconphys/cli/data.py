@@ -283,8 +283,8 @@ def data_video(
             shutil.copyfile(video, staging / "video.mp4")
         write_camera(staging / "camera.json", camera)
         write_ply(staging / "gaussians.ply", dataset.asset(index).gaussians)
-        # frame 0's lowest point above the ground (z = 0): what `predict --drop-height` takes
-        drop_height = round(float(item["anchors"][0][:, 2].min()), 4)
+        # frame 0's lowest anchor above the ground, as stored: what `predict --drop-height` takes
+        drop_height = round(dataset.meta(index)["initial_state"]["drop_height"], 4)
         truth = {"sample": sample, "view": view, **meta["attributes"], "drop_height_m": drop_height}
         (staging / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
     typer.echo(f"wrote {out}: video.mp4, camera.json, gaussians.ply, truth.json")
