@@ -615,6 +615,7 @@ def test_a_camera_file_must_fit_the_fall():
         SEGMENTER_FALL_FIT_PX,
         check_camera_file,
         fall_direction,
+        rule_size_masks,
     )
     from reconphys.capture.camera import CameraSpec
 
@@ -624,6 +625,14 @@ def test_a_camera_file_must_fit_the_fall():
     angle, moved, across = fall_direction(masks, 0.03, camera)
     assert angle < 3.0 and moved > 10.0 and across > 0.9
     check_camera_file(masks, 0.03, camera, 0.5)  # no error
+    # a phone's larger frames are read at the rules' size, as estimate_camera reads them: the
+    # same answer as the masks brought down to it, the pixels moved in the large masks' own
+    large = masks.repeat_interleave(3, 1).repeat_interleave(3, 2)  # [T, 288, 288]
+    small = rule_size_masks(large)
+    read = fall_direction(large, 0.03, camera.resized(288, 288))
+    expected = fall_direction(small, 0.03, camera.resized(128, 128))
+    assert read[0] == expected[0] and read[1] == pytest.approx(expected[1] * 288 / 128)
+    assert read[0] < 3.0 and read[1] == pytest.approx(3 * moved, rel=0.05)
     flipped = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))
     opengl = CameraSpec(K, flipped @ camera.world_to_cam, 96, 96, 0.0, "cam.json")
     assert fall_direction(masks, 0.03, opengl)[0] > 177.0

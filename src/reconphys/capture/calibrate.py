@@ -509,7 +509,15 @@ def fall_direction(
 
     Across the view gravity moves a point at pixel (x, y) (normalised) towards
     ``(g_x − x·g_z, g_y − y·g_z)``, g the camera frame's world-down: a direction that does not
-    depend on the point's depth."""
+    depend on the point's depth. Read at the rules' size (:func:`rule_size_masks`), as
+    :func:`estimate_camera` reads the fall; the pixels moved are given in the masks' own."""
+    small = rule_size_masks(masks)
+    if small is not None:
+        resized = camera.resized(small.shape[2], small.shape[1])
+        found = fall_direction(small, frame_dt, resized, _rule_size_fit_px(fit_px, masks, small))
+        if found is None:
+            return None
+        return found[0], found[1] * masks.shape[2] / small.shape[2], found[2]
     track = mask_track(masks)
     count = fall_frames(track, frame_dt, fit_px)
     if count < MIN_FALL_FRAMES:
