@@ -122,14 +122,6 @@ def mask_box(mask: Tensor) -> Tensor:
     return _box(u.double() + 0.5, v.double() + 0.5)
 
 
-def box_iou(a: Tensor, b: Tensor) -> float:
-    width = (torch.minimum(a[1], b[1]) - torch.maximum(a[0], b[0])).clamp_min(0)
-    height = (torch.minimum(a[3], b[3]) - torch.maximum(a[2], b[2])).clamp_min(0)
-    inter = float(width * height)
-    area = float((a[1] - a[0]) * (a[3] - a[2]) + (b[1] - b[0]) * (b[3] - b[2])) - inter
-    return inter / area if area > 0 else 0.0
-
-
 # Silhouettes are compared on a window around the object, not on the whole frame: reduced to
 # 64 px as a whole frame, a small or thin object spans a few pixels, and the true geometry of a
 # robot's leg filmed at 128 px scored IoU 0.49 against its own exact mask (the check's bar was

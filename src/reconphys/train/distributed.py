@@ -73,12 +73,3 @@ def all_reduce_mean(values: torch.Tensor, context: Distributed) -> torch.Tensor:
 def barrier(context: Distributed) -> None:
     if context.enabled:
         dist.barrier()
-
-
-def broadcast_error(message: str | None, context: Distributed) -> str | None:
-    """Rank 0's error message (or None) on every rank, so all ranks stop together."""
-    if not context.enabled:
-        return message
-    box = [message]
-    dist.broadcast_object_list(box, src=0)
-    return box[0]
