@@ -85,6 +85,12 @@ def test_train_gs_defaults_are_the_settings_defaults():
             assert params[field.name].default == field.default, field.name
 
 
+def test_predict_preview_default_is_the_pipelines():
+    from reconphys.pipeline.settings import PREVIEW_FRAMES
+
+    assert _params("predict")["preview_frames"].default == PREVIEW_FRAMES
+
+
 def _capture_make_dataset(monkeypatch) -> list:
     seen = []
 

@@ -114,7 +114,9 @@ def predict_command(
         0, "--refine-steps", help="Gradient refinement steps after that (minutes; 0: none)."
     ),
     refine_resolution: int = typer.Option(64, help="Render size of the refinement, pixels."),
-    preview_frames: int = typer.Option(60, help="Frames in preview.mp4 (0: no preview)."),
+    preview_frames: int = typer.Option(
+        60, help="Frames in preview.mp4 (0: no preview; pipeline.settings.PREVIEW_FRAMES)."
+    ),
     device: str = typer.Option("auto", help=f"{DEVICE_CHOICES}."),
     overwrite: bool = typer.Option(False, help="Replace an existing OUT."),
 ):

@@ -66,6 +66,7 @@ from .search import (
     network_intervals,
     observables,
 )
+from .settings import PREVIEW_FRAMES
 
 PLACEMENTS = ("auto", "as-is", "fit")
 GROUNDS = ("camera", "landed")
@@ -720,7 +721,7 @@ def write_outputs(
     result: PredictResult,
     out: str | os.PathLike,
     overwrite: bool = False,
-    preview_frames: int = 60,
+    preview_frames: int = PREVIEW_FRAMES,
     device: str | torch.device = "cpu",
 ) -> dict:
     """Write the asset folder (docs/design.md#asset-format) plus ``preview.mp4`` / ``preview.png``
