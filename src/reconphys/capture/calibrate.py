@@ -511,10 +511,10 @@ def fall_direction(
     ``(g_x − x·g_z, g_y − y·g_z)``, g the camera frame's world-down: a direction that does not
     depend on the point's depth. Read at the rules' size (:func:`rule_size_masks`), as
     :func:`estimate_camera` reads the fall; the pixels moved are given in the masks' own."""
-    small = rule_size_masks(masks)
-    if small is not None:
-        resized = camera.resized(small.shape[2], small.shape[1])
-        found = fall_direction(small, frame_dt, resized, _rule_size_fit_px(fit_px, masks, small))
+    at_rules = _at_rules_size(masks, fit_px, camera)
+    if at_rules is not None:
+        small, small_fit_px, small_camera = at_rules
+        found = fall_direction(small, frame_dt, small_camera, small_fit_px)
         if found is None:
             return None
         return found[0], found[1] * masks.shape[2] / small.shape[2], found[2]
@@ -616,10 +616,10 @@ def object_depth(
     the camera frame is the camera's, its size is known, so the fall's pixels give the depth
     (module doc, 1, with the pitch known), at the rules' size as :func:`estimate_camera` reads
     it (:func:`rule_size_masks`). InputError when the video shows no free fall."""
-    small = rule_size_masks(masks)
-    if small is not None:
-        resized = camera.resized(small.shape[2], small.shape[1])
-        return object_depth(small, frame_dt, resized, _rule_size_fit_px(fit_px, masks, small))
+    at_rules = _at_rules_size(masks, fit_px, camera)
+    if at_rules is not None:
+        small, small_fit_px, small_camera = at_rules
+        return object_depth(small, frame_dt, small_camera, small_fit_px)
     track = mask_track(masks)
     count = _free_fall_frames(track, frame_dt, fit_px)
     rotation = camera.world_to_cam[:3, :3].double().numpy()
@@ -712,10 +712,18 @@ def rule_size_masks(masks: Tensor, max_side: int = CAMERA_MAX_SIDE) -> Tensor | 
     return small if bool(small.flatten(1).any(1).all()) else None
 
 
-def _rule_size_fit_px(fit_px: float, masks: Tensor, small: Tensor) -> float:
-    """The masks' pixel error ``fit_px`` at the size of ``small`` (rule_size_masks): it shrinks
-    with them, not below the exact masks' FALL_FIT_PX."""
-    return max(FALL_FIT_PX, fit_px * small.shape[2] / masks.shape[2])
+def _at_rules_size(
+    masks: Tensor, fit_px: float, camera: CameraSpec | None = None
+) -> tuple[Tensor, float, CameraSpec | None] | None:
+    """The masks brought to the rules' size (:func:`rule_size_masks`), their pixel error
+    ``fit_px`` there (it shrinks with them, not below the exact masks' FALL_FIT_PX) and
+    ``camera`` at their size; None where the masks are read as they are."""
+    small = rule_size_masks(masks)
+    if small is None:
+        return None
+    small_fit_px = max(FALL_FIT_PX, fit_px * small.shape[2] / masks.shape[2])
+    resized = None if camera is None else camera.resized(small.shape[2], small.shape[1])
+    return small, small_fit_px, resized
 
 
 def estimate_camera(
@@ -739,17 +747,17 @@ def estimate_camera(
     (the fall still gives the scale and the pitch; :func:`_given_ground` says when it is
     refused)."""
     height_px, width_px = masks.shape[1:3]
-    small = rule_size_masks(masks)
-    if small is not None:  # read there, the camera brought back (CameraSpec.resized both ways)
-        given = None
-        if intrinsics is not None:
-            known = CameraSpec(
-                intrinsics.double(), torch.eye(4, dtype=torch.float64), width_px, height_px
-            )
-            given = known.resized(small.shape[2], small.shape[1]).K
-        fit = _rule_size_fit_px(fit_px, masks, small)
+    known = None
+    if intrinsics is not None:
+        known = CameraSpec(
+            intrinsics.double(), torch.eye(4, dtype=torch.float64), width_px, height_px
+        )
+    at_rules = _at_rules_size(masks, fit_px, known)
+    if at_rules is not None:  # read there, the camera brought back (CameraSpec.resized both ways)
+        small, small_fit_px, small_known = at_rules
+        given = None if small_known is None else small_known.K
         read = estimate_camera(
-            small, frame_dt, fov_deg, fit, ground_from_touch, touch, given, drop_height
+            small, frame_dt, fov_deg, small_fit_px, ground_from_touch, touch, given, drop_height
         )
         factor = small.shape[2] / width_px
         camera = read.camera.resized(width_px, height_px)
