@@ -300,12 +300,15 @@ def test_masks_that_make_the_object_metres_across_are_refused():
 
 
 def test_a_fall_too_short_to_show_the_scale_is_refused():
+    """Refused naming the camera file, and no turn of the video: nothing falls sideways or up."""
     masks, *_ = ball_masks(15.0, 2.0, 0.004, 0.1)  # released 4 mm above the ground
-    with pytest.raises(InputError, match="--camera FILE"):
+    with pytest.raises(InputError, match="--camera FILE") as refused:
         estimate_camera(masks, 0.03)
+    assert "upright" not in str(refused.value)
     still = masks[-1:].expand(30, -1, -1).clone()  # nothing falls at all
-    with pytest.raises(InputError, match="--camera FILE"):
+    with pytest.raises(InputError, match="--camera FILE") as refused:
         estimate_camera(still, 0.03)
+    assert "upright" not in str(refused.value)
 
 
 def test_the_segmenters_masks_need_a_fall_of_five_frames():
@@ -605,6 +608,16 @@ def test_the_release_is_read_in_the_masks_own_pixels():
     assert abs(read_release(large, 0.03).time_s - read) > 0.03
 
 
+def _ball_and_its_camera():
+    """A ball's exact masks [30, 96, 96] dropped 0.45 m, 2 m from a camera 15° down, and that
+    camera (45° field of view) as a camera file's."""
+    from reconphys.capture.camera import CameraSpec
+
+    masks, w2c, _ = ball_masks(15.0, 2.0, 0.45, 0.1)
+    K = intrinsics_from_fov(45.0, 96, 96, dtype=torch.float64)
+    return masks, CameraSpec(K, torch.from_numpy(w2c), 96, 96, 0.0, "cam.json")
+
+
 def test_a_camera_file_must_fit_the_fall():
     """check_camera_file: a ball's exact masks pass with their own camera (the fall within a few
     degrees of gravity's image direction); the same camera in OpenGL's convention (y up, z
@@ -619,9 +632,7 @@ def test_a_camera_file_must_fit_the_fall():
     )
     from reconphys.capture.camera import CameraSpec
 
-    masks, w2c, _ = ball_masks(15.0, 2.0, 0.45, 0.1)
-    K = intrinsics_from_fov(45.0, 96, 96, dtype=torch.float64)
-    camera = CameraSpec(K, torch.from_numpy(w2c), 96, 96, 0.0, "cam.json")
+    masks, camera = _ball_and_its_camera()
     angle, moved, across = fall_direction(masks, 0.03, camera)
     assert angle < 3.0 and moved > 10.0 and across > 0.9
     check_camera_file(masks, 0.03, camera, 0.5)  # no error
@@ -634,7 +645,7 @@ def test_a_camera_file_must_fit_the_fall():
     assert read[0] == expected[0] and read[1] == pytest.approx(expected[1] * 288 / 128)
     assert read[0] < 3.0 and read[1] == pytest.approx(3 * moved, rel=0.05)
     flipped = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))
-    opengl = CameraSpec(K, flipped @ camera.world_to_cam, 96, 96, 0.0, "cam.json")
+    opengl = CameraSpec(camera.K, flipped @ camera.world_to_cam, 96, 96, 0.0, "cam.json")
     assert fall_direction(masks, 0.03, opengl)[0] > 177.0
     with pytest.raises(InputError, match=r"cam.json \[world_to_cam\]: in this camera the object "):
         check_camera_file(masks, 0.03, opengl, 0.5)
@@ -644,7 +655,7 @@ def test_a_camera_file_must_fit_the_fall():
     with pytest.raises(InputError) as refused:
         check_camera_file(masks, 0.03, opengl, coarse)
     assert "falls" not in str(refused.value)
-    under = CameraSpec(K, camera.world_to_cam, 96, 96, 3.0, "cam.json")  # the ground 3 m up
+    under = CameraSpec(camera.K, camera.world_to_cam, 96, 96, 3.0, "cam.json")  # the ground 3 m up
     with pytest.raises(InputError, match="below the ground"):
         check_camera_file(masks, 0.03, under, 0.5)
     masks, w2c, _ = ball_masks(-40.0, 3.0, 5.0, 0.1, fov=60.0)  # from below; lands after 1 s
@@ -653,6 +664,43 @@ def test_a_camera_file_must_fit_the_fall():
     assert fall_direction(masks, 0.03, below)[0] < 5.0
     with pytest.raises(InputError, match="does not end on a ground this camera sees"):
         check_camera_file(masks, 0.03, below, 0.5)
+
+
+def test_a_video_on_its_side_or_upside_down_is_refused_with_the_turn_that_fixes_it():
+    """A ball's fall turned upside down or a quarter either way (a phone's clip that lost its
+    display rotation): the camera file's check reads no fall down the image (fall_frames) but one
+    along another of its directions, 90–180° from gravity's, and refuses naming the ffmpeg turn
+    that sets it upright (the way the centroid accelerates says which); without a camera file
+    the fall down the image is too short and the same turn is named. Upright, the fall read in
+    any direction is gravity's, and the check passes."""
+    from reconphys.capture.calibrate import (
+        TURNED_FALL_ANGLE_DEG,
+        check_camera_file,
+        fall_direction,
+        fall_frames,
+        mask_track,
+    )
+
+    masks, camera = _ball_and_its_camera()
+    assert fall_direction(masks, 0.03, camera, image_down=False)[0] < 3.0
+    turns = {  # torch.rot90's k over (H, W): the turn the video took → the filter that undoes it
+        2: ("upside down", "hflip,vflip"),
+        1: ("on its side", "transpose=1"),  # turned anticlockwise: gravity points right
+        -1: ("on its side", "transpose=2"),
+    }
+    for k, (state, undo) in turns.items():
+        turned = torch.rot90(masks, k, (1, 2))
+        assert fall_frames(mask_track(turned), 0.03) < 4  # no fall down the image
+        angle = fall_direction(turned, 0.03, camera, image_down=False)[0]
+        assert TURNED_FALL_ANGLE_DEG < angle and abs(angle - (180 if k == 2 else 90)) < 5
+        with pytest.raises(InputError, match=rf"{state} .*-vf {undo} OUT"):
+            check_camera_file(turned, 0.03, camera, 0.5)
+        with pytest.raises(InputError, match=rf"falls freely .*{state} .*-vf {undo} OUT"):
+            estimate_camera(turned, 0.03, fov_deg=45.0)
+        back = {"hflip,vflip": 2, "transpose=1": -1, "transpose=2": 1}[undo]  # clockwise: k −1
+        upright = torch.rot90(turned, back, (1, 2))
+        assert torch.equal(upright, masks)
+        check_camera_file(upright, 0.03, camera, 0.5)  # no error
 
 
 def test_rest_depth_is_where_the_ray_meets_the_ground():

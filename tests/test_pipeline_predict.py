@@ -1037,6 +1037,8 @@ def test_first_frames_agreement():
         ({"width": -3}, "[width]: expected a positive integer"),
         ({"K": [[1000, 0, 960], [0, 1000, 540], [0, 0, 1]]},  # a 1080p camera's, size not given
          "[K]: its principal point (960, 540) is outside the 32×32 image"),
+        ({"K": [[40, 0, 32], [0, 40, 18], [0, 0, 1]], "width": 64, "height": 36},  # 16:9
+         "[width]: K was made for 64×36 frames and the video's are 32×32, another shape"),
     ],
 )  # fmt: skip
 def test_camera_file_with_wrong_shapes(bundle, tmp_path, change, expected):
@@ -1049,6 +1051,27 @@ def test_camera_file_with_wrong_shapes(bundle, tmp_path, change, expected):
         tmp_path,
         expected,
     )
+
+
+def test_a_camera_file_of_another_shape_is_refused_not_stretched(tmp_path):
+    """A 1080p camera file read for an encoder's 1920×1088 frames is K scaled to them (the shape
+    within 1 %); for the same clip on its side (1080×1920: a phone's clip that lost its rotation)
+    or cropped to 4:3 it is refused, where scaling K per axis would stretch the lens ×3.2 or
+    ×1.3, for read_camera and read_intrinsics alike."""
+    from reconphys.capture.camera import read_camera, read_intrinsics
+
+    K = [[1400.0, 0.0, 960.0], [0.0, 1400.0, 540.0], [0.0, 0.0, 1.0]]
+    pose = {"world_to_cam": np.eye(4).tolist()}
+    for extra in (pose, {}):
+        path = tmp_path / f"cam{len(extra)}.json"
+        path.write_text(json.dumps({"K": K, "width": 1920, "height": 1080, **extra}))
+        read = read_camera if extra else read_intrinsics
+        padded = read(path, 1920, 1088)
+        padded_K = padded.K if extra else padded
+        assert float(padded_K[1, 1]) == pytest.approx(1400.0 * 1088 / 1080)
+        for size in ((1080, 1920), (1440, 1080)):
+            with pytest.raises(InputError, match=r"\[width\]: K was made for 1920×1080 frames"):
+                read(path, *size)
 
 
 def test_a_camera_file_in_another_convention_is_refused(bundle, tmp_path):

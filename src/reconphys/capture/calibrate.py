@@ -292,20 +292,29 @@ def mask_pixel(fit_px: float) -> float:
     return max(1.0, fit_px / SEGMENTER_FALL_FIT_PX)
 
 
-def fall_frames(track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX) -> int:
+def fall_frames(
+    track: _Track, frame_dt: float, fit_px: float = FALL_FIT_PX, image_down: bool = True
+) -> int:
     """How many frames from frame 0 the centroid (per image axis) and the bottom edge each follow
     one parabola (free fall): the longest run whose fits stay within ``fit_px`` + 2 % of the
     object's radius (the bottom edge stops at contact while the centroid goes on as the object
-    squashes), ending before the bottom first comes within LANDED_PIXELS of its lowest."""
+    squashes), ending before the bottom first comes within LANDED_PIXELS of its lowest.
+
+    ``image_down=False``: a fall in any direction of the image (a video on its side or upside
+    down) — the centroid alone, the whole clip, no landing read from the bottom edge."""
     radius = math.sqrt(track.area[0] / math.pi)
     tolerance = fit_px + 0.02 * radius
-    lowest = track.bottom.max()
-    landed = int(np.nonzero(track.bottom >= lowest - LANDED_PIXELS * mask_pixel(fit_px))[0][0])
+    landed = len(track.area)
+    if image_down:
+        lowest = track.bottom.max()
+        near = track.bottom >= lowest - LANDED_PIXELS * mask_pixel(fit_px)
+        landed = int(np.nonzero(near)[0][0])
     count = min(3, landed)
     for n in range(4, landed + 1):
         times = np.arange(n) * frame_dt
         worst = 0.0
-        for series in (track.centroid[:n, 0], track.centroid[:n, 1], track.bottom[:n]):
+        edges = (track.bottom[:n],) if image_down else ()
+        for series in (track.centroid[:n, 0], track.centroid[:n, 1], *edges):
             fit = np.polyval(np.polyfit(times, series, 2), times)
             worst = max(worst, float(np.abs(fit - series).max()))
         if worst > tolerance:
@@ -428,9 +437,10 @@ def _fit_fall(
     # start: a parabola through v(t) gives the acceleration in pixels → the depth
     c2, c1, _ = np.polyfit(times, uv[:, 1], 2)
     if not 2 * c2 > 0.2 * fy * GRAVITY_MAGNITUDE / 100.0:  # slower than g at 100 m: no fall seen
+        advice = _or_turned(GIVE_CAMERA, track, frame_dt, pixel, count)
         raise InputError(
             "the object does not accelerate downwards in the first frames: the video does not "
-            f"show a free fall to read the scale from; {GIVE_CAMERA}",
+            f"show a free fall to read the scale from; {advice}",
             source="camera from the video",
         )
     pitch0 = math.radians(PITCH_PRIOR_DEG)
@@ -486,13 +496,52 @@ def min_fall_frames(fit_px: float) -> int:
 def _free_fall_frames(track: _Track, frame_dt: float, fit_px: float) -> int:
     count, needed = fall_frames(track, frame_dt, fit_px), min_fall_frames(fit_px)
     if count < needed:
+        any_way = fall_frames(track, frame_dt, fit_px, image_down=False)  # turned video?
         masks = " with the mask segmenter's masks" if needed > MIN_FALL_FRAMES else ""
         raise InputError(
             f"the object falls freely in {count} frame(s) (fewer than {needed}{masks}): the "
-            f"video does not show the scale; {GIVE_CAMERA}",
+            "video does not show the scale; "
+            f"{_or_turned(GIVE_CAMERA, track, frame_dt, mask_pixel(fit_px), any_way)}",
             source="camera from the video",
         )
     return count
+
+
+def _acceleration(track: _Track, count: int, frame_dt: float) -> np.ndarray:
+    """px/s² [2] (u, v): the centroid's acceleration over frames 0 … count − 1, a parabola per
+    image axis."""
+    times = np.arange(count) * frame_dt
+    return np.array([2 * np.polyfit(times, track.centroid[:count, i], 2)[0] for i in (0, 1)])
+
+
+def _or_turned(
+    advice: str,
+    track: _Track,
+    frame_dt: float,
+    pixel: float,  # the masks' own pixel in image pixels (mask_pixel)
+    count: int,  # frames of the fall: the centroid's acceleration is read over them
+) -> str:
+    """``advice``, after a hint where the object falls towards a side or the top of the image,
+    not its bottom (gravity's direction in the image of any camera filming upright): a video on
+    its side or upside down — a phone's clip that lost its display rotation, frames exported
+    without it. No hint for a fall of fewer than MIN_FALL_FRAMES frames or one that moves the
+    centroid less than FALL_CHECK_PX of the masks' own pixels."""
+    if count < MIN_FALL_FRAMES:
+        return advice
+    acceleration = _acceleration(track, count, frame_dt)  # px/s², image u and v
+    moved = 0.5 * float(np.linalg.norm(acceleration)) * ((count - 1) * frame_dt) ** 2
+    if moved < FALL_CHECK_PX * pixel or acceleration[1] > abs(acceleration[0]):
+        return advice
+    across, down = acceleration.tolist()
+    if abs(across) >= abs(down):
+        side, turn = ("right", "transpose=1") if across > 0 else ("left", "transpose=2")
+        where, state = f"towards the image's {side} side", "on its side"
+    else:
+        where, turn, state = "towards the image's top", "hflip,vflip", "upside down"
+    return (
+        f"the object falls {where}: if the video is {state} (a phone's clip that lost its "
+        f"rotation), turn it upright first (e.g. ffmpeg -i IN -vf {turn} OUT); else {advice}"
+    )
 
 
 def fall_direction(
@@ -500,6 +549,7 @@ def fall_direction(
     frame_dt: float,  # seconds between frames
     camera: CameraSpec,  # a known camera (a file's)
     fit_px: float = FALL_FIT_PX,
+    image_down: bool = True,  # False: a fall along any direction of the image (fall_frames)
 ) -> tuple[float, float, float] | None:
     """How the fall seen in the masks agrees with the camera's gravity: (the angle in degrees
     between the centroid's acceleration over the free fall and the image direction in which
@@ -514,18 +564,16 @@ def fall_direction(
     at_rules = _at_rules_size(masks, fit_px, camera)
     if at_rules is not None:
         small, small_fit_px, small_camera = at_rules
-        found = fall_direction(small, frame_dt, small_camera, small_fit_px)
+        found = fall_direction(small, frame_dt, small_camera, small_fit_px, image_down)
         if found is None:
             return None
         return found[0], found[1] * masks.shape[2] / small.shape[2], found[2]
     track = mask_track(masks)
-    count = fall_frames(track, frame_dt, fit_px)
+    count = fall_frames(track, frame_dt, fit_px, image_down)
     if count < MIN_FALL_FRAMES:
         return None
     times = np.arange(count) * frame_dt
-    acceleration = np.array(
-        [2 * np.polyfit(times, track.centroid[:count, i], 2)[0] for i in (0, 1)]
-    )
+    acceleration = _acceleration(track, count, frame_dt)
     K = camera.K.double().numpy()
     down = camera.world_to_cam[:3, :3].double().numpy() @ np.array([0.0, 0.0, -1.0])
     x = (track.centroid[0, 0] - K[0, 2]) / K[0, 0]
@@ -545,6 +593,12 @@ def fall_direction(
 # it moves the centroid FALL_CHECK_PX or more. docs/usage.md "Recordings from another engine".
 MAX_FALL_ANGLE_DEG = 90.0
 FALL_CHECK_PX = 3.0
+# Where no fall runs down the image (fall_frames), one along any of its directions (a video on
+# its side or upside down) must lie within 70° of gravity's: of the upright validation clips
+# read that way with their true cameras, 7 of 8 came out at 11–59° (one whose segmenter masks
+# missed the object, 179°); where it applied to the same clips turned, a quarter turn read
+# 55–126°, upside down mostly 150–180°. docs/usage.md#a-video-on-its-side.
+TURNED_FALL_ANGLE_DEG = 70.0
 
 
 def check_camera_file(masks: Tensor, frame_dt: float, camera: CameraSpec, fit_px: float) -> None:
@@ -561,13 +615,19 @@ def check_camera_file(masks: Tensor, frame_dt: float, camera: CameraSpec, fit_px
             source=camera.source,
             field="world_to_cam",
         )
-    fall = fall_direction(masks, frame_dt, camera, fit_px)
+    fall, limit = fall_direction(masks, frame_dt, camera, fit_px), MAX_FALL_ANGLE_DEG
+    if fall is None:  # no fall down the image: one along any of its directions
+        fall = fall_direction(masks, frame_dt, camera, fit_px, image_down=False)
+        limit = TURNED_FALL_ANGLE_DEG
     moved = FALL_CHECK_PX * mask_pixel(fit_px)  # the masks' own pixels
-    if fall is not None and fall[0] > MAX_FALL_ANGLE_DEG and fall[1] >= moved:
+    if fall is not None and fall[0] > limit and fall[1] >= moved:
+        track = mask_track(masks)
+        any_way = fall_frames(track, frame_dt, fit_px, image_down=False)
+        turned = _or_turned("", track, frame_dt, mask_pixel(fit_px), any_way)
         raise InputError(
             f"in this camera the object falls {fall[0]:.0f}° away from gravity's direction in "
-            f"the image: {CAMERA_CONVENTION}; or the masks do not follow the object (give them "
-            "with --masks DIR)",
+            f"the image; {turned}{CAMERA_CONVENTION}; or the masks do not follow the object "
+            "(give them with --masks DIR)",
             source=camera.source,
             field="world_to_cam",
         )
@@ -784,7 +844,8 @@ def estimate_camera(
             f"the fall read from the masks makes the object {size:.3g} m across, "
             f"{float(params[2]):.3g} m away (more than {MAX_READ_SIZE_M:g} m across): the masks "
             "do not follow a falling object, or the video plays slower than it was filmed; "
-            f"{GIVE_CAMERA}, or the masks with --masks DIR",
+            f"{_or_turned(GIVE_CAMERA, track, frame_dt, mask_pixel(fit_px), count)}, or the "
+            "masks with --masks DIR",
             source="camera from the video",
         )
     # frame 0: the object's extent below its centre. The image's down leans towards the camera

@@ -9,7 +9,8 @@ Camera file (``--camera cam.json``; OpenCV convention, docs/design.md#convention
       "ground_height": 0.0                               optional, metres (default 0)
     }
 
-When ``width``/``height`` differ from the video's, K is scaled to the video. A file with K and
+When ``width``/``height`` differ from the video's, K is scaled to the video (the same shape
+within 5 %: MAX_ASPECT_CHANGE; a turned or cropped video is refused). A file with K and
 no ``world_to_cam`` (a checkerboard calibration without a floor marker) gives the intrinsics
 alone: the pose and the ground are then read from the video (:func:`read_intrinsics`).
 ``--camera dataset`` is the dataset's view 0 (2 m from the point (0, 0, 0.3) m, 15° elevation,
@@ -134,9 +135,15 @@ def read_intrinsics(path: str | os.PathLike, width: int, height: int) -> Tensor 
     return K * torch.tensor([width / size[0], height / size[1], 1.0], dtype=K.dtype)[:, None]
 
 
+# A camera file's width:height may differ from the video's by an encoder's padding (1080 →
+# 1088 rows: 0.7 %), not by a turn (a phone's clip that lost its rotation: 16:9 → 9:16) or a
+# crop to another shape (16:9 → 4:3, 29 %), which scaling K per axis would take for a lens
+MAX_ASPECT_CHANGE = 0.05
+
+
 def _intrinsics(data: dict, source: str, width: int, height: int) -> tuple[Tensor, list[int]]:
     """A camera file's K [3, 3] and the [width, height] it was made for (the frames' when not
-    given), checked."""
+    given), checked: its shape within MAX_ASPECT_CHANGE of the frames'."""
     K = _matrix(data, "K", (3, 3), source)
     if not (K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1 and K[2, :2].abs().sum() == 0):
         raise InputError(
@@ -148,6 +155,14 @@ def _intrinsics(data: dict, source: str, width: int, height: int) -> tuple[Tenso
         if not isinstance(value, int) or value < 1:
             raise InputError(f"expected a positive integer, got {value!r}", source, key)
         size.append(value)
+    if abs(math.log(size[0] * height / (size[1] * width))) > MAX_ASPECT_CHANGE:
+        raise InputError(
+            f"K was made for {size[0]}×{size[1]} frames and the video's are {width}×{height}, "
+            "another shape: a video on its side (a phone's clip that lost its rotation: turn it "
+            "upright first) or cropped; give the camera of these frames",
+            source,
+            "width",
+        )
     cx, cy = float(K[0, 2]), float(K[1, 2])
     if not (0 < cx < size[0] and 0 < cy < size[1]):
         raise InputError(
