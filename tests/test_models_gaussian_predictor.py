@@ -507,7 +507,7 @@ def test_the_object_distance_without_a_fall_is_where_it_rests_on_the_ground():
         observations.append(
             stored_observation(frames, camera.K, camera.world_to_cam, 0.03, name, masks=masks)
         )
-    depth, how = object_distance(observations[0])
+    depth, how, _ = object_distance(observations[0])
     assert how == "rest on the ground"
     K, w2c = camera.K.double(), camera.world_to_cam.double()
     pixel = torch.tensor([47.0, 50.0, 1.0], dtype=torch.float64)  # last frame: bottom edge, centre
@@ -516,6 +516,20 @@ def test_the_object_distance_without_a_fall_is_where_it_rests_on_the_ground():
     assert abs(float(point_world[2])) < 1e-6
     with pytest.raises(InputError, match="--gaussians or --mesh"):
         object_distance(observations[1])
+
+
+def test_a_fall_read_at_another_speed_names_the_rate_it_was_filmed_at():
+    """Played s× slower than filmed, gravity shows s² weaker and the fall reads the object s²
+    farther than it rests: a 30-fps drop played at 20 fps reads ×2.25 and names 30 fps; a 30-fps
+    drop played at 60 (fast) reads ×0.25 and names 30 fps too."""
+    from reconphys.models.reconstruct import _fall_rest_warning
+
+    slow = _fall_rest_warning(4.5, 2.0, 20.0)
+    assert "×2.2 where it rests" in slow and "slower (slow motion?)" in slow
+    assert slow.endswith("--fps (about 30 fps)")
+    fast = _fall_rest_warning(0.5, 2.0, 60.0)
+    assert "plays faster" in fast and fast.endswith("--fps (about 30 fps)")
+    assert _fall_rest_warning(2e4, 2.0, 30.0).endswith("--fps (its real frame rate)")  # ×100
 
 
 def test_a_fall_misread_against_a_known_cameras_ground_gives_way_to_the_rest():
@@ -538,10 +552,11 @@ def test_a_fall_misread_against_a_known_cameras_ground_gives_way_to_the_rest():
     fall = object_depth(masks, 0.03, camera)
     rest = rest_depth(masks, camera)
     assert fall > 2 * rest > 0
-    depth, how = object_distance(known)
+    depth, how, warning = object_distance(known)
     assert depth == rest and how.startswith("rest on the ground (the fall read")
+    assert "plays slower (slow motion?)" in warning and "--fps (its real frame rate)" in warning
     estimated = replace(known, camera_estimate={"how": "from the video"})
-    assert object_distance(estimated) == (fall, "fall")
+    assert object_distance(estimated) == (fall, "fall", None)
     wide = torch.zeros(30, 64, 64)
     for t in range(30):  # 24 px wide, falling at 20 px/s² from the top: resting ~13 m away
         top = round(0.5 * 20.0 * (t * 0.03) ** 2)

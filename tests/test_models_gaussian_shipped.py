@@ -112,7 +112,7 @@ def test_shipped_object_centric_predictor_beats_a_flat_cut_out_on_unseen_views()
         observation = stored_observation(
             frames[0], cameras.K[0], cameras.world_to_cam[0], settings.frame_dt, "drop", masks[0]
         )
-        distance, how = object_distance(observation)
+        distance, how, _ = object_distance(observation)
         predicted, path = predicted_gaussians(observation, SHIPPED_GS_CROP_PATH)
         flat = billboard_gaussians(
             frames[0, 0], masks[0, 0], cameras.K[0], cameras.world_to_cam[0], distance

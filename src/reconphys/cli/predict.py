@@ -220,6 +220,9 @@ def predict_command(
     masks_warning = read.get("masks_rating", {}).get("warning")
     if masks_warning:
         typer.echo(f"warning: masks: {masks_warning}", err=True)
+    distance_warning = summary.get("object_distance", {}).get("warning")
+    if distance_warning:
+        typer.echo(f"warning: object distance: {distance_warning}", err=True)
     velocity_warning = summary.get("initial_velocity", {}).get("warning")
     if velocity_warning:
         typer.echo(f"warning: initial velocity: {velocity_warning}", err=True)

@@ -8,6 +8,7 @@ path (:mod:`reconphys.pipeline.predict`), so that neither imports the other.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -159,13 +160,15 @@ def feed_forward_asset(
 FALL_REST_AGREEMENT = 2.0
 
 
-def object_distance(observation: Observation) -> tuple[float, str]:
-    """How far the object is in frame 0 (metres, the camera z of its centre) and how that was
-    read: from its free fall (:func:`~reconphys.capture.calibrate.object_depth`), else from
-    where it rests on the camera's ground (:func:`~reconphys.capture.calibrate.rest_depth`). With
-    a known camera (a file's) the rest is also the check on the fall: more than
-    :data:`FALL_REST_AGREEMENT` times apart, the masks misread the fall and the rest is taken.
-    InputError when neither is there (no fall seen and the resting object not on the ground)."""
+def object_distance(observation: Observation) -> tuple[float, str, str | None]:
+    """How far the object is in frame 0 (metres, the camera z of its centre), how that was
+    read, and a warning or None: from its free fall
+    (:func:`~reconphys.capture.calibrate.object_depth`), else from where it rests on the
+    camera's ground (:func:`~reconphys.capture.calibrate.rest_depth`). With a known camera (a
+    file's) the rest is also the check on the fall: more than :data:`FALL_REST_AGREEMENT` times
+    apart, the masks misread the fall or the video plays at another speed than it was filmed
+    (:func:`_fall_rest_warning`), and the rest is taken. InputError when neither is there (no
+    fall seen and the resting object not on the ground)."""
     masks, camera = observation.masks, observation.camera
     rest = rest_depth(masks, camera)
     try:
@@ -175,12 +178,14 @@ def object_distance(observation: Observation) -> tuple[float, str]:
     known = observation.camera_estimate is None  # a file's (or the dataset's) camera
     misread = known and fall is not None and rest is not None
     misread = misread and not 1 / FALL_REST_AGREEMENT <= fall / rest <= FALL_REST_AGREEMENT
+    warning = None
     if fall is not None and not misread:
         distance, how = fall, "fall"
     elif rest is not None:
         distance, how = rest, "rest on the ground"
         if fall is not None:
             how += f" (the fall read {fall:.3g} m: more than ×{FALL_REST_AGREEMENT:g} off)"
+            warning = _fall_rest_warning(fall, rest, observation.recorded_fps)
     else:
         raise InputError(
             "cannot tell how far the object is (no free fall in the first frames and the resting "
@@ -197,7 +202,29 @@ def object_distance(observation: Observation) -> tuple[float, str]:
             source=camera.source,
             field="world_to_cam",
         )
-    return distance, how
+    return distance, how, warning
+
+
+def _fall_rest_warning(fall: float, rest: float, recorded_fps: float | None) -> str:
+    """What a fall read ``fall`` metres away, against ``rest`` metres where the object rests on
+    a known camera's ground, may mean: masks that misread the fall, or a video that plays at
+    another speed than it was filmed — played ×s slower, gravity shows s² weaker and the fall
+    reads the object s² farther, so it was filmed at about ``recorded_fps``·√(fall / rest) (named
+    for a rate ×0.25–×8 the one it plays at)."""
+    ratio = fall / rest
+    speed = "slower (slow motion?)" if ratio > 1 else "faster"
+    plausible = 1 / 16 <= ratio <= 64  # filmed at ×0.25–×8 the rate it plays at
+    filmed = (
+        f"about {recorded_fps * math.sqrt(ratio):.0f} fps"
+        if recorded_fps and plausible
+        else "its real frame rate"
+    )
+    return (
+        f"the fall reads the object {fall:.2f} m away, ×{ratio:.2g} where it rests on the "
+        f"camera's ground ({rest:.2f} m, taken): the masks misread the fall (check preview.mp4, "
+        f"or give them with --masks DIR), or the video plays {speed} than it was filmed — then "
+        f"the physics' time is off too: give the rate it was filmed at with --fps ({filmed})"
+    )
 
 
 # The crop the Gaussians are put on, in multiples of the model's own (3: 48 → 144 px, 9 times

@@ -467,8 +467,10 @@ def check_initial_speed(velocity: torch.Tensor, source: str) -> None:  # velocit
     if not speed <= MAX_INITIAL_SPEED_M_S:
         raise InputError(
             f"the first frames read as a launch at {speed:.3g} m/s (more than "
-            f"{MAX_INITIAL_SPEED_M_S:g}): the masks do not follow a falling object, or its "
-            "distance is misread; give the masks with --masks DIR (or its shape with --gaussians)",
+            f"{MAX_INITIAL_SPEED_M_S:g}): the masks do not follow a falling object, its "
+            "distance is misread, or the video plays slower than it was filmed (gravity then "
+            "shows weaker, read as a throw); give the masks with --masks DIR (or its shape with "
+            "--gaussians), or a slow-motion video's real frame rate with --fps",
             source=source,
         )
 
@@ -527,8 +529,10 @@ def predict_observation(
         object_centric = gs_model.model.config.crop
         distance = None
         if object_centric:  # the object-centric predictor places the object at its distance
-            distance, how = object_distance(observation)
+            distance, how, warning = object_distance(observation)
             details["object_distance"] = {"m": round(distance, 4), "how": how}
+            if warning is not None:
+                details["object_distance"]["warning"] = warning
         # the physics is read on the Gaussians at the model's size (as the search was tuned);
         # the asset carries those on the finer crop (reconstruct.DETAIL_FACTOR), on its anchors
         placed, gs_path = predicted_gaussians(observation, gs_model, distance, detail=0)
