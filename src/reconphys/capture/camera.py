@@ -158,7 +158,8 @@ def _intrinsics(data: dict, source: str, width: int, height: int) -> tuple[Tenso
     if abs(math.log(size[0] * height / (size[1] * width))) > MAX_ASPECT_CHANGE:
         raise InputError(
             f"K was made for {size[0]}×{size[1]} frames and the video's are {width}×{height}, "
-            "another shape: a video on its side (a phone's clip that lost its rotation: turn it "
+            "another shape: a camera of the other orientation (a landscape calibration for a "
+            "portrait clip), a video on its side (a phone's clip that lost its rotation: turn it "
             "upright first) or cropped; give the camera of these frames",
             source,
             "width",
