@@ -930,6 +930,9 @@ def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (
         (lambda t: _square(t), "does not move (every frame overlaps frame 0 by IoU ≥ 1.00)"),
         (lambda t: _square(t) if t < 3 else np.zeros((32, 32), np.uint8),
          "the object is found in only 3 of 30 frames"),
+        (lambda t: _square(t, top=min(2 * t, 24)) if t < 25 else np.zeros((32, 32), np.uint8),
+         "empty from frame 25 (0.75 s after the release): the object leaves the view or the "
+         "masks lose it; cut the recording before it with --end 0.73, or give"),
         (lambda t: _square(t, top=min(2 * t, 24)) | (_square(t, top=20) if t == 0 else 0),
          "the object's mask in frame 0 is not the one of frame 2 (area ×2.00, overlap IoU 0.00"),
         (lambda t: _square(t, top=min(4 + 2 * max(0, t - 7), 24)),  # held for 8 frames
@@ -939,9 +942,9 @@ def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (
 )  # fmt: skip
 def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     """Masks that cannot be one released object (background, a static region, an object that is
-    not there, a frame 0 with a second object where it will land, one held still before its
-    release) are refused with what to give instead, and no
-    asset; a square that falls 2 px a frame (then rests) passes the same checks."""
+    not there, one that leaves the view, a frame 0 with a second object where it will land, one
+    held still before its release) are refused with what to give instead, and no asset; a square
+    that falls 2 px a frame (then rests) passes the same checks."""
     from reconphys.capture.masks import check_masks, check_release
 
     frames = _frame_folder(bundle, tmp_path)
@@ -959,6 +962,22 @@ def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     falling = np.stack([_square(t, top=min(2 * t, 24)) for t in range(30)]) / 255.0
     check_masks(torch.from_numpy(falling).float(), "falling")  # no error
     check_release(torch.from_numpy(falling).float(), "falling")
+
+
+def test_an_object_that_leaves_the_view_names_the_end_that_keeps_it():
+    """check_in_view: masks empty from frame 25 of a clip started 1.2 s into the recording name
+    --end 1.94 (between frames 24 and 25, at 1.92 and 1.95 s: 0–24 kept, enough for a reader of
+    20); empty from frame 12, too early to cut for 20 frames; in view throughout, no error."""
+    from reconphys.capture.masks import check_in_view
+
+    masks = torch.ones(30, 4, 4)
+    check_in_view(masks, "clip", 1.2, 0.03, 20)  # no error
+    masks[25:] = 0
+    with pytest.raises(InputError, match=r"empty from frame 25 .* --end 1\.94, or give"):
+        check_in_view(masks, "clip", 1.2, 0.03, 20)
+    masks[12:] = 0
+    with pytest.raises(InputError, match=r"too early to cut the recording there .*reads 20 "):
+        check_in_view(masks, "clip", 1.2, 0.03, 20)
 
 
 def test_a_hold_without_a_fall_is_refused_with_start_auto(bundle, tmp_path):

@@ -217,6 +217,32 @@ def check_masks(masks: Tensor, source: str, first: int = 1) -> None:
             )
 
 
+def check_in_view(
+    masks: Tensor,  # [T, H, W]
+    source: str,
+    start: float = 0.0,  # seconds into the recording of frame 0
+    frame_dt: float = 0.03,
+    needed: int = 1,  # frames the reader needs (predict's model: 20)
+) -> None:
+    """Refuse masks empty in a frame after frame 0 (one-line InputError naming ``source``): the
+    object leaves the view (rolls out, is hidden) or the masks lose it, and every reader of the
+    fall, the landing and the rest needs it in each frame. The refusal names the ``--end`` that
+    keeps the frames before it where those are ``needed`` or more."""
+    seen = (masks.detach().flatten(1) > 0.5).any(1)  # [T]
+    if bool(seen.all()):
+        return
+    first = int(torch.nonzero(~seen)[0])
+    if first >= needed:
+        cut = f"cut the recording before it with --end {start + (first - 0.5) * frame_dt:.2f}, "
+    else:
+        cut = f"too early to cut the recording there (the model reads {needed} frames); "
+    raise InputError(
+        f"the object's mask is empty from frame {first} ({first * frame_dt:.2f} s after the "
+        f"release): the object leaves the view or the masks lose it; {cut}or {WHAT_TO_GIVE}",
+        source=source,
+    )
+
+
 def first_frames_agreement(masks: Tensor) -> tuple[float, float]:
     """How alike frame 0's and frame 2's masks of [T ≥ 3, H, W] are: their IoU with frame 2's
     moved (by whole pixels) so that its centroid is on frame 0's, and the area ratio frame 0 /

@@ -48,6 +48,7 @@ from .masks import (
     alpha_masks,
     backdrop_colour,
     border_is_uniform,
+    check_in_view,
     check_masks,
     check_release,
     read_background,
@@ -509,6 +510,8 @@ def load_observation(
     filmed_height, filmed_width = clip.decoded.raw.shape[1:3]  # decoded, before the crop
     height, width = chosen.shape[1:3]
     check_release(chosen, str(path), start, frame_dt)
+    masks_source = str(masks) if masks is not None else str(path)
+    check_in_view(chosen, masks_source, start, frame_dt, max(min_frames, 1))
     if not auto and start > 0:  # a start given: the hold before it
         release = _release_before(partial(read, decoded=clip.decoded), start, read_end, frame_dt)
     estimate, intrinsics = None, None
