@@ -889,6 +889,29 @@ def _frame_folder(bundle, tmp_path):
     return folder
 
 
+def test_a_clip_that_fades_in_is_refused_with_the_start_after_the_fade(bundle, tmp_path):
+    """The drop's frames with a black frame 0 and frame 1 at a third of its brightness (a
+    fade-in): refused before its masks are read, naming --start 0.06 (frame 2, the first at full
+    brightness), and no asset; check_fade_in passes a clip whose exposure settles (frame 0 at
+    60 %) and one of uniform brightness."""
+    from reconphys.capture.observation import check_fade_in
+
+    frames = _frame_folder(bundle, tmp_path)
+    first = imageio.imread(frames / "frame_0.png")
+    imageio.imwrite(frames / "frame_0.png", np.zeros_like(first))
+    second = imageio.imread(frames / "frame_1.png")
+    imageio.imwrite(frames / "frame_1.png", (second // 3).astype(np.uint8))
+    _fails(
+        [frames, "--fps", "33.3333", "--gaussians", bundle / "gaussians.ply"],
+        tmp_path,
+        "frame 0 is dark against the rest of the clip (0% of its median brightness): a fade-in "
+        "or a cut before it, not the release; give --start 0.06 (its first frame at full "
+        "brightness)",
+    )
+    check_fade_in(np.array([0.6, 0.9, 1.0, 1.0, 1.0]), "settling", 0.0, 0.03)  # no error
+    check_fade_in(np.ones(5), "uniform", 0.0, 0.03)  # no error
+
+
 def test_mismatched_mask_count(bundle, tmp_path):
     frames = _frame_folder(bundle, tmp_path)
     masks = tmp_path / "masks"

@@ -218,6 +218,30 @@ def too_short(count: int, frame_dt: float, needed: int) -> str:
     )
 
 
+# Frame 0 darker than this share of the clip's median brightness is not the release: a fade-in
+# or a cut before the clip (the fall read from it is wrong, and frame 0 gives the asset its
+# colours). A phone's exposure settling at the start changes far less.
+FADE_IN_SHARE = 0.5
+
+
+def check_fade_in(brightness: np.ndarray, source: str, start: float, frame_dt: float) -> None:
+    """Refuse a clip whose frame 0 is dark against the rest (``brightness`` [T], each frame's
+    mean, frames at ``frame_dt`` from ``start`` seconds into the recording): a fade-in or a black
+    frame before the clip. The refusal names the --start of its first frame at 90 % of the
+    median brightness or more."""
+    usual = float(np.median(brightness))
+    if not usual > 0 or brightness[0] >= FADE_IN_SHARE * usual:
+        return
+    bright = np.nonzero(brightness >= 0.9 * usual)[0]
+    after = f"--start {start + bright[0] * frame_dt:.2f} (its first frame at full brightness)"
+    raise InputError(
+        f"frame 0 is dark against the rest of the clip ({brightness[0] / usual:.0%} of its "
+        f"median brightness): a fade-in or a cut before it, not the release; give {after} or "
+        "--start SECONDS at the release",
+        source=source,
+    )
+
+
 class _Decoded(NamedTuple):
     """A stretch of the recording decoded (:func:`_decode`)."""
 
@@ -337,6 +361,8 @@ def _read_clip(
     if not np.array_equal(picks, np.arange(recorded)):  # else every frame: no copy
         raw = raw[picks]
     rgb = torch.from_numpy(raw[..., :3]).float().div_(255.0)  # as numpy's float32 / 255
+    brightness = rgb.mean((1, 2, 3)).numpy()[np.searchsorted(picks, before)]  # [T] wanted
+    check_fade_in(brightness, str(path), start, frame_dt)
     # a hand-held camera: its shake read from the background and taken out (stabilize.py); a
     # one-colour border (a plain backdrop) shows no shake, and an object on it is not one
     shake = Shake(None, 0) if border_is_uniform(rgb) else read_shake(rgb)
