@@ -956,6 +956,9 @@ def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (
         (lambda t: _square(t, top=min(2 * t, 24)) if t < 25 else np.zeros((32, 32), np.uint8),
          "empty from frame 25 (0.75 s after the release): the object leaves the view or the "
          "masks lose it; cut the recording before it with --end 0.73, or give"),
+        (lambda t: _square(t, top=24) if t < 4 else _square(t, top=min(2 * (t - 4), 24)),
+         "the object's mask jumps at frame 4 (its centroid leaves its track by 4.3× the "
+         "object's size in one frame; no falling body does): frames 0–3 follow something else"),
         (lambda t: _square(t, top=min(2 * t, 24)) | (_square(t, top=20) if t == 0 else 0),
          "the object's mask in frame 0 is not the one of frame 2 (area ×2.00, overlap IoU 0.00"),
         (lambda t: _square(t, top=min(4 + 2 * max(0, t - 7), 24)),  # held for 8 frames
@@ -965,10 +968,11 @@ def _square(t: int, top: int = 4) -> np.ndarray:  # a 6-px object at row `top` (
 )  # fmt: skip
 def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     """Masks that cannot be one released object (background, a static region, an object that is
-    not there, one that leaves the view, a frame 0 with a second object where it will land, one
-    held still before its release) are refused with what to give instead, and no asset; a square
-    that falls 2 px a frame (then rests) passes the same checks."""
-    from reconphys.capture.masks import check_masks, check_release
+    not there, one that leaves the view, masks on a shadow until the object drops into view, a
+    frame 0 with a second object where it will land, one held still before its release) are
+    refused with what to give instead, and no asset; a square that falls 2 px a frame (then
+    rests) passes the same checks."""
+    from reconphys.capture.masks import check_first_frames_track, check_masks, check_release
 
     frames = _frame_folder(bundle, tmp_path)
     masks = tmp_path / "masks"
@@ -985,6 +989,7 @@ def test_implausible_masks_are_refused(bundle, tmp_path, mask_of, expected):
     falling = np.stack([_square(t, top=min(2 * t, 24)) for t in range(30)]) / 255.0
     check_masks(torch.from_numpy(falling).float(), "falling")  # no error
     check_release(torch.from_numpy(falling).float(), "falling")
+    check_first_frames_track(torch.from_numpy(falling).float(), "falling")
 
 
 def test_an_object_that_leaves_the_view_names_the_end_that_keeps_it():

@@ -48,6 +48,7 @@ from .masks import (
     alpha_masks,
     backdrop_colour,
     border_is_uniform,
+    check_first_frames_track,
     check_in_view,
     check_masks,
     check_release,
@@ -538,6 +539,7 @@ def load_observation(
     check_release(chosen, str(path), start, frame_dt)
     masks_source = str(masks) if masks is not None else str(path)
     check_in_view(chosen, masks_source, start, frame_dt, max(min_frames, 1))
+    check_first_frames_track(chosen, masks_source)
     if not auto and start > 0:  # a start given: the hold before it
         release = _release_before(partial(read, decoded=clip.decoded), start, read_end, frame_dt)
     estimate, intrinsics = None, None
