@@ -253,9 +253,9 @@ JUMP_FRAMES = 6  # a jump centred on frames 1–5
 
 
 def masks_jump(masks: Tensor) -> tuple[float, int]:
-    """The largest jump of masks [T ≥ 3, H, W] (every frame non-empty) over frames 1 …
-    ``last``: the centroid's second difference (px per frame²) over the object's size (√area,
-    the smaller of its two later frames'), and the frame it is centred on."""
+    """The largest jump of masks [T ≥ 3, H, W] (every frame non-empty), over frames 1 … T − 2:
+    the centroid's second difference (px per frame²) over the object's size (√area, the smaller
+    of the centre frame's and the next one's), and the frame it is centred on."""
     seen = masks.detach().cpu() > 0.5
     area = seen.flatten(1).sum(1).double()  # [T]
     rows = torch.arange(seen.shape[1], dtype=torch.float64)
