@@ -257,13 +257,9 @@ def masks_jump(masks: Tensor) -> tuple[float, int]:
     the centroid's second difference (px per frame²) over the object's size (√area, the smaller
     of the centre frame's and the next one's), and the frame it is centred on."""
     seen = masks.detach().cpu() > 0.5
-    area = seen.flatten(1).sum(1).double()  # [T]
-    rows = torch.arange(seen.shape[1], dtype=torch.float64)
-    cols = torch.arange(seen.shape[2], dtype=torch.float64)
-    centroid = torch.stack([seen.sum(1).double() @ cols, seen.sum(2).double() @ rows], 1)
-    centroid = centroid / area[:, None]  # [T, 2] px (x, y)
+    centroid = torch.stack([_pixel_centroid(mask) for mask in seen])  # [T, 2] px (row, column)
     second = (centroid[2:] - 2 * centroid[1:-1] + centroid[:-2]).norm(dim=1)  # [T − 2]
-    size = area.sqrt()
+    size = seen.flatten(1).sum(1).double().sqrt()  # [T]
     ratio = second / torch.minimum(size[1:-1], size[2:])
     frame = int(ratio.argmax())
     return float(ratio[frame]), frame + 1
